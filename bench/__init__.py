@@ -1,0 +1,1 @@
+"""Benchmark harness for near-field MIMO radar imaging on MAROON-format captures."""

@@ -1,0 +1,63 @@
+"""alignment.json: 4x4 rigid/scaled transforms between sensor frames and MAROON's lookup rule.
+
+`A2B` maps coordinates in frame A into frame B, column-vector convention `p_B = M @ [p_A; 1]`
+(MAROON_FORMAT.md 1.3). Other keys of the file (per-sensor calibration dicts) are ignored.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from bench.errors import DatasetError
+from bench.jsonio import read_json
+
+_TRANSFORM_KEY = re.compile(r"^[a-z]+2[a-z]+$")
+
+
+def read_alignment(path: Path) -> dict[str, np.ndarray]:
+    """All `src2dst` matrices of an alignment.json as float64 4x4 arrays, validated."""
+    data = read_json(path)
+    transforms = {}
+    for key, value in data.items():
+        if not _TRANSFORM_KEY.match(key) or isinstance(value, dict):
+            continue
+        try:
+            matrix = np.array(value, dtype=np.float64).reshape(4, 4)
+        except (ValueError, TypeError):
+            raise DatasetError(path, f"'{key}' is not a 4x4 matrix (nested list of 4 rows or 16 numbers)") from None
+        if not np.all(np.isfinite(matrix)):
+            raise DatasetError(path, f"'{key}' has non-finite entries")
+        if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+            raise DatasetError(path, f"'{key}' bottom row is {matrix[3].tolist()}, expected [0, 0, 0, 1]")
+        if abs(np.linalg.det(matrix[:3, :3])) < 1e-15:
+            raise DatasetError(path, f"'{key}' is singular")
+        transforms[key] = matrix
+    return transforms
+
+
+def transform_between(transforms: dict[str, np.ndarray], src: str, dst: str) -> np.ndarray:
+    """The 4x4 map from frame `src` to `dst` by MAROON's rule: direct key, else via the radar frame.
+
+    Raises KeyError naming the missing transforms.
+    """
+    if src == dst:
+        return np.eye(4)
+    direct = transforms.get(f"{src}2{dst}")
+    if direct is not None:
+        return direct
+    to_radar = {name: transforms.get(f"{name}2radar") for name in (src, dst)}
+    if src == "radar" and to_radar[dst] is not None:
+        return np.linalg.inv(to_radar[dst])
+    if dst == "radar" and to_radar[src] is not None:
+        return to_radar[src]
+    if src != "radar" and dst != "radar" and to_radar[src] is not None and to_radar[dst] is not None:
+        return np.linalg.inv(to_radar[dst]) @ to_radar[src]
+    raise KeyError(f"no transform from '{src}' to '{dst}': need '{src}2{dst}' or '{src}2radar' and '{dst}2radar'")
+
+
+def apply_transform(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Map (N, 3) points with a 4x4 homogeneous matrix."""
+    points = np.asarray(points, dtype=np.float64)
+    return points @ matrix[:3, :3].T + matrix[:3, 3]

@@ -1,0 +1,357 @@
+"""Reader for MAROON captures (`root/object/distance`, MAROON_FORMAT.md). Read-only: it never writes.
+
+Every problem raises a DatasetError that names the file and says what is wrong. Reference-code behaviour that is
+kept: the last frame is the default, radar frames 96x96 are sliced to the 94x94 imaging array, the grid comes
+from the frame's `volume` entry, the viewer's `mask_bb` defaults are applied (in memory only), the RealSense depth
+is read with the `rgb` intrinsics. Behaviour that is not kept: nothing is migrated or written back.
+"""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from bench.alignment import read_alignment
+from bench.antennas import N_STORED, USED, AntennaArray, load_antenna_array
+from bench.capture import CameraIntrinsics, Capture, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
+from bench.errors import DatasetError
+from bench.images import read_binary_mask, read_uint16_png
+from bench.jsonio import read_json
+from bench.safe_pickle import load_pickled_dict
+
+RADAR_FOLDER = "radar_72.0_82.0_128"
+MESH_CANDIDATES = ("mesh_masked_smoothed.obj", "mesh_masked.obj", "mesh_smoothed.obj", "mesh.obj")
+# MAROON's configured reconstruction grid, used only when calibration.json has no entry for a frame (2.5, 7).
+CONFIG_GRID = RadarGrid(bb_min_m=(-0.15, -0.15, 0.25), bb_max_m=(0.15, 0.15, 0.40), size=(301, 301, 151))
+PARTS = ("radar", "realsense", "mesh")
+_FRAME_FILE = re.compile(r"^(\d{6})\.npy$")
+_IMAGE_FILE = re.compile(r"^(\d{6})\.png$")
+_MASK_BB_KEYS = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
+
+
+# ----------------------------------------------------------------------------------------------- discovery
+def discover_captures(root: str | Path) -> list[Path]:
+    """All capture folders `root/<object>/<distance>` (distance a number of centimetres), sorted."""
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(root, "dataset root is not a directory")
+    captures = [d for obj in sorted(root.iterdir()) if obj.is_dir() and not obj.name.startswith((".", "00_"))
+                for d in sorted(obj.iterdir(), key=lambda p: p.name) if d.is_dir() and d.name.isdigit()]
+    if not captures:
+        raise DatasetError(root, "no captures found (expected folders <object>/<distance_cm>/)")
+    return captures
+
+
+# ------------------------------------------------------------------------------------------------ metadata
+def _number(path: Path, value, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise DatasetError(path, f"{what} must be a finite number, found {value!r}")
+    return float(value)
+
+
+def read_metadata(capture_dir: Path) -> Metadata:
+    """metadata.json, with the viewer's `mask_bb` defaults applied in memory (never written back)."""
+    path = capture_dir / "metadata.json"
+    raw = read_json(path)
+    if "distance_meters" not in raw:
+        raise DatasetError(path, "missing key 'distance_meters'")
+    distance_m = _number(path, raw["distance_meters"], "distance_meters")
+    if not 0.0 < distance_m < 10.0:
+        raise DatasetError(path, f"distance_meters must be in metres (0-10), found {distance_m}")
+    erosion = raw.get("mask_erosion", 0)
+    if isinstance(erosion, bool) or not isinstance(erosion, int) or erosion < 0:
+        raise DatasetError(path, f"mask_erosion must be a non-negative integer, found {erosion!r}")
+    bb = raw.get("mask_bb", {})
+    if not isinstance(bb, dict) or set(bb) - set(_MASK_BB_KEYS):
+        raise DatasetError(path, f"mask_bb must be a dict with keys among {', '.join(_MASK_BB_KEYS)}")
+    mask_bb_m = {key: _number(path, value, f"mask_bb.{key}") for key, value in bb.items()}
+    if "mask_3d_threshold" in raw and "zmax" not in mask_bb_m:  # legacy form of mask_bb.zmax (section 8)
+        mask_bb_m["zmax"] = _number(path, raw["mask_3d_threshold"], "mask_3d_threshold")
+    if distance_m == 0.3 and "zmin" not in mask_bb_m:
+        mask_bb_m["zmin"] = 0.26
+    mask_bb_m.setdefault("zmax", 0.7)
+    for axis in "xyz":
+        low, high = mask_bb_m.get(f"{axis}min"), mask_bb_m.get(f"{axis}max")
+        if low is not None and high is not None and low >= high:
+            raise DatasetError(path, f"mask_bb.{axis}min ({low}) must be below {axis}max ({high})")
+    labels = raw.get("labels", [])
+    calibration = raw.get("calibration")
+    return Metadata(distance_m=distance_m, mask_erosion=erosion, mask_bb_m=mask_bb_m,
+                    calibration=calibration if isinstance(calibration, str) else None,
+                    labels=tuple(str(label) for label in labels) if isinstance(labels, list) else (), raw=raw)
+
+
+def alignment_path(capture_dir: Path, metadata: Metadata) -> Path:
+    """alignment.json of the capture, else `<root>/00_registration/<metadata.calibration>/alignment.json`."""
+    local = capture_dir / "alignment.json"
+    if local.is_file() or metadata.calibration is None:
+        return local
+    fallback = capture_dir.parent.parent / "00_registration" / metadata.calibration / "alignment.json"
+    return fallback if fallback.is_file() else local
+
+
+# --------------------------------------------------------------------------------------------------- radar
+def find_radar_folder(capture_dir: Path) -> Path:
+    """`radar_72.0_82.0_128`, or the only `radar_*` folder of the capture."""
+    preferred = capture_dir / RADAR_FOLDER
+    if preferred.is_dir():
+        return preferred
+    folders = sorted(p for p in capture_dir.glob("radar_*") if p.is_dir())
+    if len(folders) == 1:
+        return folders[0]
+    if not folders:
+        raise DatasetError(capture_dir, f"no radar folder (expected {RADAR_FOLDER}/)")
+    raise DatasetError(capture_dir, f"several radar folders and none named {RADAR_FOLDER}: "
+                                    f"{', '.join(p.name for p in folders)}")
+
+
+def list_radar_frames(radar_dir: Path) -> list[int]:
+    """Indices of the raw frames `calibrated_data/NNNNNN.npy`, sorted."""
+    data_dir = radar_dir / "calibrated_data"
+    if not data_dir.is_dir():
+        raise DatasetError(data_dir, "folder is missing")
+    frames = sorted(int(m.group(1)) for p in data_dir.iterdir() if (m := _FRAME_FILE.match(p.name)))
+    if not frames:
+        raise DatasetError(data_dir, "no frame files NNNNNN.npy")
+    return frames
+
+
+def _parse_grid(path: Path, key: str, entry) -> RadarGrid:
+    try:
+        bb_min = [float(v) for v in entry["bb_min"]]
+        bb_max = [float(v) for v in entry["bb_max"]]
+        size = entry["grid_size"]
+    except (KeyError, TypeError, ValueError):
+        raise DatasetError(path, f"'{key}' needs bb_min, bb_max (3 numbers) and grid_size (3 integers)") from None
+    if len(bb_min) != 3 or len(bb_max) != 3 or not isinstance(size, list) or len(size) != 3:
+        raise DatasetError(path, f"'{key}' bb_min, bb_max and grid_size must have 3 entries each")
+    if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in size):
+        raise DatasetError(path, f"'{key}' grid_size must be positive integers, found {size}")
+    if not all(math.isfinite(v) for v in bb_min + bb_max):
+        raise DatasetError(path, f"'{key}' bounds must be finite")
+    if size[0] < 2 or size[1] < 2 or math.prod(size) > 2_000_000_000:
+        raise DatasetError(path, f"'{key}' grid_size {size} must have nx, ny >= 2 and at most 2e9 voxels")
+    for axis, n, low, high in zip("xyz", size, bb_min, bb_max):
+        if (n > 1 and not high > low) or (n == 1 and high < low):
+            raise DatasetError(path, f"'{key}' {axis} range [{low}, {high}] is empty for {n} samples")
+        if max(abs(low), abs(high)) > 10.0:
+            raise DatasetError(path, f"'{key}' {axis} bounds must be in metres (|value| <= 10)")
+    if bb_min[2] <= 0.0:
+        raise DatasetError(path, f"'{key}' z range must lie in front of the array (z > 0), found zmin {bb_min[2]}")
+    return RadarGrid(bb_min_m=tuple(bb_min), bb_max_m=tuple(bb_max), size=tuple(size))
+
+
+def read_radar_grids(radar_dir: Path) -> dict[int, RadarGrid]:
+    """Per-frame pixel/voxel grids from the radar calibration.json (`volume`, or legacy `depth` bounds)."""
+    path = radar_dir / "calibration.json"
+    data = read_json(path)
+    grids = {}
+    for key, entry in data.items():
+        if not key.isdigit():
+            continue
+        if not isinstance(entry, dict):
+            raise DatasetError(path, f"entry '{key}' must be a dict")
+        volume = entry.get("volume") or (entry.get("depth") if "bb_min" in entry.get("depth", {}) else None)
+        if volume is not None:
+            grids[int(key)] = _parse_grid(path, key, volume)
+    return grids
+
+
+def _check_frequencies(path: Path, freqs) -> np.ndarray:
+    freqs_hz = np.asarray(freqs)
+    if freqs_hz.ndim != 1 or freqs_hz.size == 0 or not np.issubdtype(freqs_hz.dtype, np.number) \
+            or np.iscomplexobj(freqs_hz):
+        raise DatasetError(path, f"'fvec' must be a non-empty 1-D real array, found {freqs_hz.dtype} {freqs_hz.shape}")
+    freqs_hz = freqs_hz.astype(np.float64)
+    if not np.all(np.isfinite(freqs_hz)):
+        raise DatasetError(path, "'fvec' has NaN or Inf entries")
+    if freqs_hz.max() < 1e6:
+        raise DatasetError(path, f"'fvec' must be in Hz; its maximum {freqs_hz.max():g} looks like GHz")
+    if freqs_hz.min() < 1e9 or freqs_hz.max() > 1e12:
+        raise DatasetError(path, f"'fvec' must lie in 1 GHz - 1 THz (in Hz), found {freqs_hz.min():g}-{freqs_hz.max():g}")
+    if freqs_hz.size > 1 and not np.all(np.diff(freqs_hz) > 0):
+        raise DatasetError(path, "'fvec' must be strictly increasing")
+    return freqs_hz
+
+
+def read_radar_frame(radar_dir: Path, index: int, grid: RadarGrid, empty_filtered: bool = False) -> RadarFrame:
+    """One raw frame, validated, sliced to the 94x94 imaging array, cast to complex64."""
+    name = f"{index:06d}_emptyfiltered.npy" if empty_filtered else f"{index:06d}.npy"
+    path = radar_dir / "calibrated_data" / name
+    if not path.is_file():
+        raise DatasetError(path, "frame file is missing")
+    frame = load_pickled_dict(path)
+    for key in ("xr", "fvec"):
+        if key not in frame:
+            raise DatasetError(path, f"frame dict has no '{key}' (keys: {', '.join(sorted(frame))})")
+    xr = frame["xr"]
+    if not isinstance(xr, np.ndarray) or not np.iscomplexobj(xr):
+        raise DatasetError(path, f"'xr' must be a complex array, found {getattr(xr, 'dtype', type(xr).__name__)}")
+    freqs_hz = _check_frequencies(path, frame["fvec"])
+    n_used = USED.stop - USED.start
+    if xr.ndim != 3 or xr.shape[:2] not in ((N_STORED, N_STORED), (n_used, n_used)):
+        raise DatasetError(path, f"'xr' must be (96, 96, F) or (94, 94, F) [rx, tx, f], found {xr.shape}")
+    if xr.shape[2] != freqs_hz.size:
+        raise DatasetError(path, f"'xr' has {xr.shape[2]} frequencies but 'fvec' has {freqs_hz.size}")
+    if xr.shape[0] == N_STORED:
+        xr = xr[USED, USED, :]
+    signal = np.ascontiguousarray(xr, dtype=np.complex64)
+    if not np.all(np.isfinite(signal.view(np.float32))):
+        raise DatasetError(path, "'xr' has NaN or Inf values")
+    timestamp_s = None
+    stamps = frame.get("timestamp_us")
+    if stamps is not None:
+        stamps = np.atleast_1d(np.asarray(stamps))
+        if stamps.size and np.issubdtype(stamps.dtype, np.number) and np.isfinite(stamps[0]):
+            timestamp_s = float(stamps[0]) * 1e-6
+    return RadarFrame(index=index, signal=signal, freqs_hz=freqs_hz, timestamp_s=timestamp_s, grid=grid, path=path)
+
+
+def declared_frame_count(radar_dir: Path, first_frame: int) -> int | None:
+    """`number_of_measurements` of the first frame file (the reference loader reads it from frame 0)."""
+    path = radar_dir / "calibrated_data" / f"{first_frame:06d}.npy"
+    count = load_pickled_dict(path).get("number_of_measurements")
+    count = count.item() if isinstance(count, np.generic) else count
+    return count if isinstance(count, int) and not isinstance(count, bool) else None
+
+
+# ----------------------------------------------------------------------------------------------- realsense
+def _intrinsics(path: Path, entry) -> CameraIntrinsics:
+    try:
+        values = {k: entry[k] for k in ("fx", "fy", "cx", "cy", "width", "height")}
+    except (KeyError, TypeError):
+        raise DatasetError(path, "'rgb' needs fx, fy, cx, cy, width, height") from None
+    for key, value in values.items():
+        _number(path, value, f"rgb.{key}")
+    if values["fx"] <= 0 or values["fy"] <= 0 or values["width"] < 1 or values["height"] < 1:
+        raise DatasetError(path, "rgb focal lengths and image size must be positive")
+    return CameraIntrinsics(fx=float(values["fx"]), fy=float(values["fy"]), cx=float(values["cx"]),
+                            cy=float(values["cy"]), width=int(values["width"]), height=int(values["height"]))
+
+
+def list_depth_frames(realsense_dir: Path) -> list[int]:
+    """Indices of `depth/NNNNNN.png`, sorted."""
+    depth_dir = realsense_dir / "depth"
+    if not depth_dir.is_dir():
+        raise DatasetError(depth_dir, "folder is missing")
+    frames = sorted(int(m.group(1)) for p in depth_dir.iterdir() if (m := _IMAGE_FILE.match(p.name)))
+    if not frames:
+        raise DatasetError(depth_dir, "no depth images NNNNNN.png")
+    return frames
+
+
+def read_realsense(realsense_dir: Path, index: int = -1) -> tuple[DepthFrame, list[str]]:
+    """Depth (uint16 mm, colour-aligned), mask and `rgb` intrinsics of one RealSense frame; plus notes."""
+    notes = []
+    frames = list_depth_frames(realsense_dir)
+    index = frames[index] if index < 0 else index
+    calibration_path = realsense_dir / "calibration.json"
+    calibration = read_json(calibration_path)
+    intrinsics = _intrinsics(calibration_path, calibration.get("rgb"))
+    scale = calibration.get("capture", {}).get("scale", 0.001) if isinstance(calibration.get("capture"), dict) else 0.001
+    scale_m = _number(calibration_path, scale, "capture.scale")
+    depth_path = realsense_dir / "depth" / f"{index:06d}.png"
+    depth = read_uint16_png(depth_path)
+    if depth.shape != (intrinsics.height, intrinsics.width):
+        raise DatasetError(depth_path, f"depth image is {depth.shape[1]}x{depth.shape[0]} but calibration.json rgb "
+                                       f"says {intrinsics.width}x{intrinsics.height}")
+    if not math.isclose(scale_m, 0.001, rel_tol=1e-6):
+        if not 0.0 < scale_m < 1.0:
+            raise DatasetError(calibration_path, f"capture.scale must be metres per unit in (0, 1), found {scale_m}")
+        notes.append(f"{calibration_path}: capture.scale is {scale_m}, depth converted to millimetres")
+        depth_mm = np.rint(depth * (scale_m * 1000.0))
+        if depth_mm.max(initial=0) > 65535:
+            raise DatasetError(depth_path, "depth exceeds 65535 mm after applying capture.scale")
+        depth = depth_mm.astype(np.uint16)
+    mask_path = realsense_dir / "mask" / f"{index:06d}.png"
+    mask = None
+    if mask_path.is_file():
+        mask = read_binary_mask(mask_path)
+        if mask.shape != depth.shape:
+            raise DatasetError(mask_path, f"mask is {mask.shape[1]}x{mask.shape[0]}, depth is "
+                                          f"{depth.shape[1]}x{depth.shape[0]}")
+    else:
+        notes.append(f"{mask_path}: no mask, the whole depth image is used")
+    return DepthFrame(index=index, depth_mm=depth, mask=mask, intrinsics=intrinsics, depth_scale_m=0.001,
+                      path=depth_path), notes
+
+
+# -------------------------------------------------------------------------------------------- photogrammetry
+def find_mesh(photogrammetry_dir: Path) -> Path:
+    """The ground-truth mesh: `mesh_masked_smoothed.obj`, then mesh_masked, mesh_smoothed, mesh (.obj)."""
+    for name in MESH_CANDIDATES:
+        if (photogrammetry_dir / name).is_file():
+            return photogrammetry_dir / name
+    raise DatasetError(photogrammetry_dir, f"no mesh file (looked for {', '.join(MESH_CANDIDATES)})")
+
+
+def read_mesh(path: Path) -> Mesh:
+    """A triangle mesh via Open3D (imported here only, so the methods never need it)."""
+    import open3d as o3d
+
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    triangles = np.asarray(mesh.triangles, dtype=np.int64)
+    if len(vertices) == 0 or len(triangles) == 0:
+        raise DatasetError(path, "mesh has no vertices or no triangles (missing, empty or unreadable OBJ)")
+    if not np.all(np.isfinite(vertices)):
+        raise DatasetError(path, "mesh has non-finite vertex coordinates")
+    if triangles.min() < 0 or triangles.max() >= len(vertices):
+        raise DatasetError(path, "mesh has triangle indices outside its vertex list")
+    return Mesh(vertices=vertices, triangles=triangles, path=path)
+
+
+# ------------------------------------------------------------------------------------------------- capture
+def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, ...] = PARTS,
+                 empty_filtered: bool = False, antennas: AntennaArray | None = None) -> Capture:
+    """Read one capture folder `root/object/distance` into a Capture.
+
+    `frame` is the radar frame index (-1 = last, as MAROON evaluates); `parts` chooses what to load. The radar is
+    required when asked for; a missing RealSense or photogrammetry folder leaves that part None with a note,
+    while a present but malformed file raises.
+    """
+    capture_dir = Path(capture_dir)
+    if not capture_dir.is_dir():
+        raise DatasetError(capture_dir, "capture folder does not exist")
+    if not capture_dir.name.isdigit():
+        raise DatasetError(capture_dir, "capture folder name must be the distance in centimetres (e.g. 30)")
+    unknown = set(parts) - set(PARTS)
+    if unknown:
+        raise ValueError(f"unknown capture parts {sorted(unknown)}; choose from {PARTS}")
+    metadata = read_metadata(capture_dir)
+    align_path = alignment_path(capture_dir, metadata)
+    if not align_path.is_file():
+        raise DatasetError(align_path, "alignment.json is missing (and no 00_registration fallback was found)")
+    radar_dir = find_radar_folder(capture_dir)
+    frames = list_radar_frames(radar_dir)
+    capture = Capture(root=capture_dir.parent.parent, object_name=capture_dir.parent.name,
+                      distance_cm=int(capture_dir.name), metadata=metadata, transforms=read_alignment(align_path),
+                      antennas=antennas or load_antenna_array(), radar_frames=frames)
+    if align_path.parent != capture_dir:
+        capture.notes.append(f"alignment from fallback {align_path}")
+    if "radar" in parts:
+        index = frames[frame] if frame < 0 else frame
+        if index not in frames:
+            raise DatasetError(radar_dir / "calibrated_data", f"frame {index} not present (have {frames})")
+        grids = read_radar_grids(radar_dir)
+        grid = grids.get(index)
+        if grid is None:
+            grid = CONFIG_GRID
+            capture.notes.append(f"{radar_dir / 'calibration.json'}: no volume entry for frame {index:06d}; "
+                                 "using MAROON's configured grid")
+        capture.radar = read_radar_frame(radar_dir, index, grid, empty_filtered)
+    if "realsense" in parts:
+        if (capture_dir / "realsense").is_dir():
+            capture.realsense, notes = read_realsense(capture_dir / "realsense")
+            capture.notes.extend(notes)
+        else:
+            capture.notes.append(f"{capture_dir / 'realsense'}: missing, no RealSense prior")
+    if "mesh" in parts:
+        if (capture_dir / "photogrammetry").is_dir():
+            capture.mesh = read_mesh(find_mesh(capture_dir / "photogrammetry"))
+        else:
+            capture.notes.append(f"{capture_dir / 'photogrammetry'}: missing, no ground truth")
+    return capture

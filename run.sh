@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# One entry point that sets itself up: `bash run.sh demo` (main job on the embedded synthetic dataset) or
+# `bash run.sh test` (the test suite). Set-up is idempotent: system package, .venv, the package (re-installed only
+# when pyproject.toml changes). Extra arguments go to the job (e.g. `bash run.sh test -k reader`).
+set -euo pipefail
+cd "$(dirname "$0")"
+
+need_libusb() { ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; }
+
+setup() {
+  if need_libusb; then  # `import open3d` needs Debian's libusb-1.0-0
+    echo "[setup] installing system package libusb-1.0-0"
+    sudo_cmd=""; [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
+    $sudo_cmd apt-get install -y -q libusb-1.0-0 >/dev/null 2>&1 \
+      || { $sudo_cmd apt-get update -q >/dev/null && $sudo_cmd apt-get install -y -q libusb-1.0-0 >/dev/null; }
+  fi
+  if [ ! -x .venv/bin/python ]; then
+    py=""
+    for cand in python3.11 python3.12 python3.13 python3; do
+      if command -v "$cand" >/dev/null && "$cand" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+        py=$cand; break
+      fi
+    done
+    [ -n "$py" ] || { echo "error: Python >= 3.11 is required" >&2; exit 1; }
+    echo "[setup] creating .venv with $($py --version)"
+    "$py" -m venv .venv
+  fi
+  stamp=".venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)"
+  if [ ! -f "$stamp" ]; then
+    echo "[setup] installing the package and its dependencies into .venv (first run: about a minute)"
+    .venv/bin/python -m pip install -q --upgrade pip
+    .venv/bin/python -m pip install -q -e ".[test]"
+    rm -f .venv/.installed-*; touch "$stamp"
+  fi
+}
+
+job=${1:-}
+[ $# -gt 0 ] && shift
+case "$job" in
+  demo)
+    setup
+    .venv/bin/python -m bench.synth --out data/synthetic "$@"
+    .venv/bin/python -m bench.inspect data/synthetic
+    ;;
+  test)
+    setup
+    .venv/bin/python -m pytest -q "$@"
+    ;;
+  setup)
+    setup
+    ;;
+  *)
+    echo "usage: bash run.sh demo|test|setup [args...]" >&2
+    exit 2
+    ;;
+esac
