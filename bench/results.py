@@ -1,0 +1,47 @@
+"""What one run writes: rows of results.csv and the per-capture depth PNG + JSON (DESIGN.md section 3)."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench.capture import RadarGrid
+from bench.images import write_uint16_png
+
+RESULT_COLUMNS = ["object", "distance", "frame", "method", "freq", "prior", "f_GHz", "C_g_cm", "C_s_cm", "P_cm",
+                  "P_e_cm", "valid_px", "runtime_ms", "device"]
+
+
+def depth_to_png_mm(depth_m: np.ndarray) -> np.ndarray:
+    """Depth in metres (NaN = invalid) to uint16 millimetres, rounded, 0 = invalid, clipped to 1..65535."""
+    depth_mm = np.where(np.isfinite(depth_m), np.rint(depth_m * 1000.0), 0.0)
+    depth_mm = np.where(depth_mm > 0, np.clip(depth_mm, 1, 65535), 0)
+    return depth_mm.astype(np.uint16)
+
+
+def write_depth(out_dir: Path, stem: str, depth_m: np.ndarray, grid: RadarGrid) -> Path:
+    """`out_dir/depth/<stem>.png` (MAROON radar layout: row 0 = +y, column 0 = xmin) and `<stem>.json`."""
+    depth_dir = out_dir / "depth"
+    depth_dir.mkdir(parents=True, exist_ok=True)
+    png = depth_dir / f"{stem}.png"
+    write_uint16_png(png, depth_to_png_mm(depth_m))
+    info = {"bb_min": list(grid.bb_min_m), "bb_max": list(grid.bb_max_m), "grid_size": list(grid.size),
+            "units": "uint16 millimetres, 0 = invalid, row 0 = +y, column 0 = xmin"}
+    (depth_dir / f"{stem}.json").write_text(json.dumps(info, indent=2))
+    return png
+
+
+def write_results(path: Path, rows: list[dict]) -> pd.DataFrame:
+    """Write rows atomically (temp file + rename) with the contract columns first."""
+    table = pd.DataFrame(rows)
+    for column in RESULT_COLUMNS:
+        if column not in table:
+            table[column] = np.nan
+    table = table[RESULT_COLUMNS + [c for c in table.columns if c not in RESULT_COLUMNS]]
+    tmp = path.with_suffix(".csv.tmp")
+    table.to_csv(tmp, index=False)
+    os.replace(tmp, path)
+    return table

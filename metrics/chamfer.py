@@ -1,0 +1,38 @@
+"""One-sided Chamfer distances with a KD-tree (MAROON_FORMAT.md 5.5, paper eq. 11).
+
+`C(P -> Q) = mean_{p in P} min_{q in Q} |p - q|`. C_s is reconstruction -> ground truth, C_g ground truth ->
+reconstruction. Build the ground-truth tree once per capture (`PointSet`) and reuse it for every method.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+@dataclass
+class PointSet:
+    """(N, 3) points in metres with their KD-tree, built on first use."""
+
+    points_m: np.ndarray
+    _tree: cKDTree | None = field(default=None, repr=False)
+
+    @property
+    def tree(self) -> cKDTree:
+        if self._tree is None:
+            self._tree = cKDTree(self.points_m)
+        return self._tree
+
+
+def nearest_distances_m(src_m: np.ndarray, dst: PointSet) -> np.ndarray:
+    """Distance (m) from every source point to its nearest destination point; (N,) float64."""
+    distances, _ = dst.tree.query(np.asarray(src_m, dtype=np.float64), k=1, workers=-1)
+    return distances
+
+
+def one_sided_chamfer_m(src_m: np.ndarray, dst: PointSet) -> float:
+    """Mean nearest-neighbour distance from `src_m` to `dst` in metres; NaN when either set is empty."""
+    if len(src_m) == 0 or len(dst.points_m) == 0:
+        return float("nan")
+    return float(np.mean(nearest_distances_m(src_m, dst)))
