@@ -20,6 +20,7 @@ from bench.grids import grid_for
 from bench.results import write_depth, write_results
 
 log = logging.getLogger("bench")
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 
 
 def _capture_dirs(dataset: DictConfig, root: Path) -> list[Path]:
@@ -80,7 +81,7 @@ def run(cfg: DictConfig, out_dir: Path) -> list[dict]:
     return rows
 
 
-@hydra.main(version_base="1.3", config_path="../configs", config_name="config")
+@hydra.main(version_base="1.3", config_path=str(CONFIG_DIR), config_name="config")
 def main(cfg: DictConfig) -> None:
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     try:

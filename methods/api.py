@@ -1,0 +1,152 @@
+"""The one entry point of the methods: `reconstruct(capture, method, freq, prior, device, grid, **params)`.
+
+It selects the configuration's frequencies from the loaded radar frame, builds the prior, checks the combination
+and runs one method. Timings exclude file I/O (the capture is already in memory) and one-time kernel
+compilation (a tiny warm-up call runs first on Warp devices).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from bench.capture import Capture, RadarGrid
+from methods.bp import reconstruct_bp
+from methods.correlate import correlate, correlate_volume, resolve_device
+from methods.frequencies import config_indices, select_frequencies
+from methods.fsk import DEFAULT_PRIOR_M, reconstruct_2fsk
+from methods.fsk3 import reconstruct_3fsk
+from methods.mm2fsk import reconstruct_mm2fsk
+from methods.prior import mesh_prior_m, realsense_prior_m
+from methods.reconstruction import Reconstruction
+from methods.timing import StageTimer
+
+METHODS = ("bp", "2fsk", "3fsk", "mm2fsk")
+SENSOR_PRIORS = ("realsense", "photogrammetry")
+_N_FREQS = {"2fsk": 2, "mm2fsk": 2, "3fsk": 3}
+_COMMON_PARAMS = {"threshold_db", "scalar_prior_m"}
+_PARAMS = {"bp": _COMMON_PARAMS | {"band_m"}, "2fsk": _COMMON_PARAMS, "3fsk": _COMMON_PARAMS, "mm2fsk": _COMMON_PARAMS}
+
+
+def parse_prior(prior: str | float | None) -> str | float | None:
+    """None for 'none', the sensor name for 'realsense'/'photogrammetry', else a scalar depth in metres."""
+    if prior is None or prior == "none":
+        return None
+    if prior in SENSOR_PRIORS:
+        return prior
+    try:
+        value = float(prior)
+    except (TypeError, ValueError):
+        raise ValueError(f"prior must be 'none', 'realsense', 'photogrammetry' or a depth in metres, "
+                         f"got {prior!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise ValueError(f"a scalar prior is a depth in metres in front of the array (> 0), got {prior!r}")
+    return value
+
+
+def _transform(capture: Capture, key: str) -> np.ndarray:
+    if key not in capture.transforms:
+        raise ValueError(f"capture {capture.name} has no '{key}' transform in its alignment "
+                         f"(available: {', '.join(sorted(capture.transforms)) or 'none'})")
+    return capture.transforms[key]
+
+
+def prior_image_m(capture: Capture, source: str, grid: RadarGrid) -> np.ndarray:
+    """Per-pixel prior (ny, nx) in metres on `grid` from 'realsense' or 'photogrammetry'; NaN = no prior."""
+    notes = f" ({'; '.join(capture.notes)})" if capture.notes else ""
+    if source == "realsense":
+        if capture.realsense is None:
+            raise ValueError(f"prior='realsense' needs a RealSense depth frame, but capture {capture.name} "
+                             f"has none{notes}")
+        return realsense_prior_m(capture.realsense, _transform(capture, "realsense2radar"), grid)
+    if capture.mesh is None:
+        raise ValueError(f"prior='photogrammetry' needs the photogrammetry mesh, but capture {capture.name} "
+                         f"has none{notes}")
+    return mesh_prior_m(capture.mesh, _transform(capture, "photogrammetry2radar"), grid)
+
+
+def frequency_indices(freqs_hz: np.ndarray, freq: str | Sequence[float] | None) -> np.ndarray:
+    """Indices of the frame frequencies for a configuration name, a list of target GHz, or None (all)."""
+    if freq is None:
+        return np.arange(len(freqs_hz))
+    if isinstance(freq, str):
+        return config_indices(freqs_hz, freq)
+    return select_frequencies(freqs_hz, [float(f) for f in freq])
+
+
+def _check(method: str, freq: object, n_freqs: int, prior: str | float | None, params: dict) -> None:
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    needed = _N_FREQS.get(method)
+    if needed is not None and n_freqs != needed:
+        raise ValueError(f"{method} needs a {needed}-frequency configuration, but freq={freq!r} selects "
+                         f"{n_freqs} frequencies")
+    if method == "mm2fsk" and prior not in SENSOR_PRIORS:
+        raise ValueError(f"mm2fsk needs a per-pixel prior: prior='realsense' or 'photogrammetry', got {prior!r}")
+    if method in ("2fsk", "3fsk") and prior in SENSOR_PRIORS:
+        raise ValueError(f"{method} uses a scalar prior (a depth in metres, default {DEFAULT_PRIOR_M}); "
+                         f"for prior={prior!r} use method='mm2fsk'")
+    unknown = set(params) - _PARAMS[method]
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {', '.join(sorted(unknown))} for {method}; "
+                         f"allowed: {', '.join(sorted(_PARAMS[method]))}")
+    if "band_m" in params and prior is None:
+        raise ValueError("band_m sets BP's search band around a prior; give a prior as well")
+
+
+def _warm_up(signal: np.ndarray, freqs_hz: np.ndarray, capture: Capture, device: str, method: str) -> None:
+    """Compile the device kernels on a tiny problem so that the timed run excludes compilation."""
+    tx_m, rx_m = capture.antennas.tx_m, capture.antennas.rx_m
+    correlate(signal, freqs_hz, tx_m, rx_m, np.array([[0.0, 0.0, 0.3]]), device=device)
+    if method == "bp":
+        correlate_volume(signal, freqs_hz, tx_m, rx_m, [0.0], [0.0], [0.3, 0.301], device=device)
+
+
+def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | None,
+                prior: str | float | None = "none", device: str = "cpu", grid: RadarGrid | None = None,
+                **params) -> Reconstruction:
+    """Depth map of the capture's loaded radar frame with `method` (bp | 2fsk | 3fsk | mm2fsk).
+
+    freq: a configuration name of `methods.frequencies` (d05 ... d10, full, d05_d10, d1_d10, d2_d10), a list of
+    target frequencies in GHz (nearest present ones are used), or None for all frequencies.
+    prior: 'none', 'realsense', 'photogrammetry' (MM-2FSK; BP searches a band around it), or a scalar depth in
+    metres (2FSK/3FSK start from it; BP searches a band around it). grid: overrides the frame's grid.
+    params: threshold_db (filter, dB below the maximum, default 14; None = off); scalar_prior_m (the scalar
+    prior of 2FSK/3FSK when prior='none', default 0.40 m; other methods ignore it); band_m (BP with a prior).
+    """
+    frame = capture.radar
+    if frame is None:
+        raise ValueError(f"capture {capture.name} has no radar frame loaded")
+    indices = frequency_indices(frame.freqs_hz, freq)
+    prior_value = parse_prior(prior)
+    _check(method, freq, len(indices), prior_value, params)
+    device = resolve_device(device)
+    grid = grid or frame.grid
+    signal = np.ascontiguousarray(frame.signal[:, :, indices])
+    freqs_hz = frame.freqs_hz[indices]
+    if device != "cpu":
+        _warm_up(signal, freqs_hz, capture, device, method)
+
+    scalar_prior_m = float(params.pop("scalar_prior_m", DEFAULT_PRIOR_M))
+    timer = StageTimer()
+    antennas = capture.antennas
+    if prior_value in SENSOR_PRIORS:
+        with timer.stage("prior"):
+            prior_m = prior_image_m(capture, prior_value, grid)
+        if not np.isfinite(prior_m).any():
+            raise ValueError(f"the {prior_value} prior of capture {capture.name} covers no radar pixel")
+    else:
+        prior_m = prior_value
+    if method == "bp":
+        result = reconstruct_bp(signal, freqs_hz, antennas, grid, prior_m=prior_m, device=device, timer=timer,
+                                **params)
+    elif method == "mm2fsk":
+        result = reconstruct_mm2fsk(signal, freqs_hz, antennas, grid, prior_m, device=device, timer=timer,
+                                    **params)
+    else:
+        run = reconstruct_2fsk if method == "2fsk" else reconstruct_3fsk
+        result = run(signal, freqs_hz, antennas, grid, prior_m=scalar_prior_m if prior_m is None else prior_m,
+                     device=device, **params)
+    result.extra.update(freq=freq, prior=prior, device=device)
+    return result

@@ -1,0 +1,29 @@
+"""Depth filtering shared by all methods (paper section III-B): keep pixels whose magnitude is within
+`threshold_db` of the image maximum (default 14 dB, MAROON_FORMAT.md section 7); the rest become NaN."""
+from __future__ import annotations
+
+import numpy as np
+
+DEFAULT_THRESHOLD_DB = 14.0
+
+
+def keep_mask(magnitude: np.ndarray, threshold_db: float | None = DEFAULT_THRESHOLD_DB) -> np.ndarray:
+    """True where `magnitude` (linear, NaN = not evaluated) >= max * 10^(-threshold_db/20).
+
+    `threshold_db=None` keeps every evaluated (finite) pixel. The threshold is in dB below the maximum (positive).
+    """
+    magnitude = np.asarray(magnitude)
+    finite = np.isfinite(magnitude)
+    if threshold_db is None or not finite.any():
+        return finite
+    if threshold_db < 0:
+        raise ValueError(f"threshold_db is dB below the maximum and must be >= 0, got {threshold_db}")
+    floor = np.max(magnitude[finite]) * 10.0 ** (-threshold_db / 20.0)
+    with np.errstate(invalid="ignore"):
+        return finite & (magnitude >= floor)
+
+
+def filter_depth(depth_m: np.ndarray, magnitude: np.ndarray,
+                 threshold_db: float | None = DEFAULT_THRESHOLD_DB) -> np.ndarray:
+    """Copy of `depth_m` with pixels below the magnitude threshold (or not evaluated) set to NaN."""
+    return np.where(keep_mask(magnitude, threshold_db), depth_m, np.nan)
