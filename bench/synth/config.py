@@ -1,0 +1,92 @@
+"""Generator configuration, fixed layout constants and per-capture seeding.
+
+Every knob of the synthetic captures lives in `SynthConfig`; its fields (plus `GENERATOR_VERSION`) form the cache
+key of a capture, so any change regenerates exactly the captures it affects.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+GENERATOR_VERSION = "1"          # bump when the generator's output changes for an unchanged config
+C_M_PER_S = 299_792_458.0
+F_LOW_GHZ, F_HIGH_GHZ = 72.0, 82.0
+QUARTER_WAVELENGTH_M = C_M_PER_S / (F_HIGH_GHZ * 1e9) / 4.0   # 0.914 mm at 82 GHz
+DISTANCE_RANGE_CM = (20, 70)   # objects stay in front of the clutter region and the 1 m wall
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """All generator settings. Lengths in metres unless the name says otherwise; angles in degrees."""
+
+    seed: int = 0
+    frames: int = 1                          # frames per capture (radar and RealSense)
+    frequency_points: int = 128              # linspace(72 GHz, 82 GHz, frequency_points)
+    # radar scene model
+    sample_spacing_m: float = 0.9e-3         # surface samples at most this far apart (<= lambda/4 at 82 GHz)
+    reflectivity_exponent: float = 1.0       # amplitude ~ area * cos(theta_inc)^q
+    roughness_m: float = 0.1e-3              # std of per-sample displacement along the normal (phase jitter)
+    snr_db: float = 10.0                     # per-sample SNR relative to the mean object signal power of a frame
+    clutter: bool = True                     # add empty-room clutter to the raw frame
+    clutter_to_signal_db: float = 0.0        # mean clutter power / mean object signal power
+    clutter_points: int = 6                  # static point scatterers at 0.8-1.0 x the wall distance
+    # RealSense D435-like depth camera
+    focal_px: float = 615.0
+    principal_point_px: tuple[float, float] = (321.3, 242.6)
+    camera_position_m: tuple[float, float, float] = (0.0, 0.10, 0.0)   # radar space, above the array centre
+    camera_pitch_deg: float = 14.0           # tilted down: optical axis crosses y = 0 at z = 0.40 m
+    depth_noise: bool = True                 # stereo noise, steep-slope/edge holes, dropouts
+    disparity_sigma_px: float = 0.15         # sigma_z = z^2 * disparity_sigma / (f * baseline)
+    stereo_baseline_m: float = 0.05
+    max_incidence_deg: float = 78.0          # steeper surfaces return no depth
+    edge_jump_m: float = 0.02                # depth discontinuity that punches holes ...
+    edge_hole_px: int = 2                    # ... this many pixels wide
+    dropout_fraction: float = 0.002          # random isolated invalid pixels
+    extrinsic_error_mm: float = 0.0          # camera pose error used for rendering (stored pose stays nominal)
+    extrinsic_error_deg: float = 0.0
+    background_wall: bool = True
+    wall_distance_m: float = 1.0             # wall behind the objects (depth background, radar clutter plane)
+
+    def validate(self) -> None:
+        """Raise ValueError with a one-line message for settings that cannot produce a valid capture."""
+        checks = [
+            (self.frames >= 1, "frames must be >= 1"),
+            (2 <= self.frequency_points <= 512, "frequency_points must be in 2..512"),
+            (0 < self.sample_spacing_m <= QUARTER_WAVELENGTH_M + 1e-12,
+             f"sample_spacing_m must be in (0, {QUARTER_WAVELENGTH_M:.5f}] (a quarter wavelength at 82 GHz)"),
+            (self.roughness_m >= 0, "roughness_m must be >= 0"),
+            (np.isfinite(self.snr_db), "snr_db must be finite"),
+            (self.clutter_points >= 1, "clutter_points must be >= 1"),
+            (self.disparity_sigma_px >= 0 and self.stereo_baseline_m > 0, "depth noise parameters must be positive"),
+            (0 < self.max_incidence_deg <= 90, "max_incidence_deg must be in (0, 90]"),
+            (self.wall_distance_m >= 1.0, "wall_distance_m must be >= 1.0 m (clutter and wall behind every object)"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def capture_hash(config: SynthConfig, object_name: str, distance_cm: int) -> str:
+    """Cache key of one capture: generator version + full config + object + distance."""
+    payload = {"version": GENERATOR_VERSION, "config": config.to_dict(), "object": object_name,
+               "distance_cm": int(distance_cm)}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def capture_rng(config: SynthConfig, object_name: str, distance_cm: int, stream: str) -> np.random.Generator:
+    """Independent deterministic random stream per (global seed, object, distance, purpose)."""
+    words = [config.seed, zlib.crc32(object_name.encode()), int(distance_cm), zlib.crc32(stream.encode())]
+    return np.random.default_rng(np.random.SeedSequence(words))
+
+
+def frequencies_hz(config: SynthConfig) -> np.ndarray:
+    """The stepped frequencies of a frame, float64 Hz (the `fvec` written to every frame)."""
+    return np.linspace(F_LOW_GHZ * 1e9, F_HIGH_GHZ * 1e9, config.frequency_points)

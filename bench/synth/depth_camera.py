@@ -1,0 +1,139 @@
+"""RealSense D435-like depth camera: pinhole ray casting plus an active-stereo error model.
+
+Camera frame: OpenCV (x right, y down, z forward), metres inside this module; the stored depth is Z in uint16
+millimetres. Pixel (u = column, v = row) is cast through direction ((u - cx)/fx, (v - cy)/fy, 1), so the reference
+back-projection X = (u - cx) Z / fx, Y = (v - cy) Z / fy (no +0.5) recovers the hit point exactly.
+Radar space (x right, y up, z forward) and the camera frame share x and z up to the tilt and differ in the sign of
+y, so the camera-to-radar matrix is a reflection (determinant -1) by convention, not by error.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+from scipy import ndimage
+
+from bench.synth.config import SynthConfig
+from bench.synth.meshes import indexed, rotation_matrix
+from bench.synth.scenes import Scene
+
+WIDTH_PX, HEIGHT_PX, FPS = 640, 480, 30
+WALL_HALF_SIZE_M = 1.5
+WALL_COLOUR_RGB = (120, 125, 130)
+
+
+@dataclass(frozen=True)
+class CameraPose:
+    """Camera-to-radar rigid map in metres: p_radar = rotation @ p_cam + position_m."""
+
+    rotation: np.ndarray     # (3, 3), columns = camera x, y, z axes in radar space
+    position_m: np.ndarray   # (3,)
+
+    def realsense2radar(self) -> np.ndarray:
+        """4x4 for camera points in millimetres -> radar metres (the 3x3 block carries the 1e-3)."""
+        m = np.eye(4)
+        m[:3, :3] = self.rotation * 1e-3
+        m[:3, 3] = self.position_m
+        return m
+
+
+@dataclass(frozen=True)
+class DepthRender:
+    """One rendered frame: depth_mm uint16 (0 = invalid), mask uint8 (255 = object), rgb uint8 (H, W, 3)."""
+
+    depth_mm: np.ndarray
+    mask: np.ndarray
+    rgb: np.ndarray
+
+
+def intrinsics(config: SynthConfig) -> dict:
+    """The `rgb`/`depth` entry of realsense/calibration.json (depth is colour-aligned: identical)."""
+    cx, cy = config.principal_point_px
+    return {"fx": config.focal_px, "fy": config.focal_px, "cx": cx, "cy": cy, "width": WIDTH_PX,
+            "height": HEIGHT_PX, "fps": FPS}
+
+
+def nominal_pose(config: SynthConfig) -> CameraPose:
+    """Camera at `camera_position_m` (radar space), looking along +z, pitched down by `camera_pitch_deg`."""
+    a = np.deg2rad(config.camera_pitch_deg)
+    z_axis = np.array([0.0, -np.sin(a), np.cos(a)])
+    y_axis = np.array([0.0, -np.cos(a), -np.sin(a)])              # image down
+    return CameraPose(np.column_stack([[1.0, 0.0, 0.0], y_axis, z_axis]), np.asarray(config.camera_position_m, float))
+
+
+def perturbed_pose(pose: CameraPose, config: SynthConfig, rng: np.random.Generator) -> CameraPose:
+    """Pose with an extrinsic error of exactly `extrinsic_error_mm` / `extrinsic_error_deg` in random directions."""
+    axis, direction = rng.normal(size=3), rng.normal(size=3)
+    rotation = rotation_matrix(axis, config.extrinsic_error_deg) @ pose.rotation
+    offset_m = direction / np.linalg.norm(direction) * config.extrinsic_error_mm * 1e-3
+    return CameraPose(rotation, pose.position_m + offset_m)
+
+
+def _wall(config: SynthConfig) -> np.ndarray:
+    s, z = WALL_HALF_SIZE_M, config.wall_distance_m
+    corners = np.array([[-s, -s, z], [s, -s, z], [s, s, z], [-s, s, z]])
+    return np.stack([corners[[0, 2, 1]], corners[[0, 3, 2]]])     # normal towards -z (the sensors)
+
+
+def _cast(scene: Scene, pose: CameraPose, config: SynthConfig):
+    """Ray-cast every pixel: Z (m, inf = no hit), unit normals, geometry index (-1 none, len(parts) = wall)."""
+    geometries = [p.tris_m for p in scene.parts] + ([_wall(config)] if config.background_wall else [])
+    raycaster = o3d.t.geometry.RaycastingScene()
+    for tris in geometries:
+        vertices, triangles = indexed(tris)
+        raycaster.add_triangles(vertices.astype(np.float32), triangles.astype(np.uint32))
+    cx, cy = config.principal_point_px
+    v, u = np.mgrid[0:HEIGHT_PX, 0:WIDTH_PX].astype(np.float64)
+    dirs_cam = np.stack([(u - cx) / config.focal_px, (v - cy) / config.focal_px, np.ones_like(u)], -1)
+    dirs_radar = dirs_cam @ pose.rotation.T
+    rays = np.concatenate([np.broadcast_to(pose.position_m, dirs_radar.shape), dirs_radar], -1)
+    hit = raycaster.cast_rays(o3d.core.Tensor(rays.reshape(-1, 6).astype(np.float32)))
+    z_m = hit["t_hit"].numpy().reshape(HEIGHT_PX, WIDTH_PX).astype(np.float64)   # |dir_cam.z| = 1 -> t = Z
+    geometry = hit["geometry_ids"].numpy().astype(np.int64).reshape(HEIGHT_PX, WIDTH_PX)
+    geometry[~np.isfinite(z_m)] = -1
+    normals = hit["primitive_normals"].numpy().reshape(HEIGHT_PX, WIDTH_PX, 3).astype(np.float64)
+    cos_inc = np.abs(np.einsum("hwk,hwk->hw", normals, dirs_radar)) / np.linalg.norm(dirs_radar, axis=-1)
+    return z_m, cos_inc, geometry
+
+
+def _stereo_errors(z_m: np.ndarray, cos_inc: np.ndarray, config: SynthConfig, rng: np.random.Generator):
+    """Noisy Z in metres with NaN holes: disparity noise, steep slopes, depth edges, random dropouts."""
+    valid = np.isfinite(z_m)
+    z = np.where(valid, z_m, np.nan)
+    if not config.depth_noise:
+        return z
+    sigma_m = z ** 2 * config.disparity_sigma_px / (config.focal_px * config.stereo_baseline_m)
+    z = z + rng.normal(size=z.shape) * np.nan_to_num(sigma_m)
+    holes = cos_inc < np.cos(np.deg2rad(config.max_incidence_deg))
+    filled = np.where(valid, z_m, 1e3)
+    jump = np.zeros_like(valid)
+    for axis in (0, 1):
+        step = np.abs(np.diff(filled, axis=axis)) > config.edge_jump_m
+        pad = [(0, 0), (0, 0)]
+        pad[axis] = (1, 0)
+        jump |= np.pad(step, pad) | np.pad(step, [(b, a) for a, b in pad])
+    if config.edge_hole_px > 0:
+        jump = ndimage.binary_dilation(jump, iterations=config.edge_hole_px)
+    holes |= jump | (rng.random(z.shape) < config.dropout_fraction)
+    z[holes] = np.nan
+    return z
+
+
+def _shade(z_m: np.ndarray, cos_inc: np.ndarray, geometry: np.ndarray, scene: Scene) -> np.ndarray:
+    """Simple headlight shading: albedo * (0.25 + 0.75 cos(incidence)); black where nothing is hit."""
+    palette = np.array([p.colour_rgb for p in scene.parts] + [WALL_COLOUR_RGB, (0, 0, 0)], dtype=np.float64)
+    albedo = palette[np.where(geometry < 0, len(palette) - 1, geometry)]
+    light = np.where(np.isfinite(z_m), 0.25 + 0.75 * cos_inc, 0.0)
+    return np.clip(albedo * light[..., None], 0, 255).astype(np.uint8)
+
+
+def render(scene: Scene, pose: CameraPose, config: SynthConfig, rng: np.random.Generator) -> DepthRender:
+    """Depth (uint16 mm, 0 = invalid), object mask and RGB of `scene` seen from `pose` (the true pose)."""
+    z_m, cos_inc, geometry = _cast(scene, pose, config)
+    noisy_m = _stereo_errors(z_m, cos_inc, config, rng)
+    depth_mm = np.where(np.isfinite(noisy_m), np.rint(noisy_m * 1000.0), 0)
+    depth_mm = np.clip(depth_mm, 0, 65535).astype(np.uint16)
+    is_object = (geometry >= 0) & (geometry < len(scene.parts))
+    mask = np.where(is_object, 255, 0).astype(np.uint8)
+    return DepthRender(depth_mm, mask, _shade(z_m, cos_inc, geometry, scene))

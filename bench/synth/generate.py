@@ -1,0 +1,198 @@
+"""Build synthetic captures: scene -> radar frames + depth frames + ground truth, written atomically and cached.
+
+Cache: `<root>/synth_manifest.json` maps "object/distance" to the hash of generator version + config. A capture
+whose directory exists and whose hash matches is skipped; any other is rebuilt in a hidden temporary folder beside
+it and moved into place with a rename, so an interrupted run never leaves a half-written capture.
+"""
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import re
+import shutil
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from bench.antennas import load_antenna_array
+from bench.synth import depth_camera, writer
+from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
+from bench.synth.meshes import rotation_matrix
+from bench.synth.radar_model import clutter_frame, noise_frame, roughen, simulate_frame, surface_amplitudes
+from bench.synth.sampling import visible_samples
+from bench.synth.scenes import CATALOGUE, build_scene
+
+MANIFEST_NAME = "synth_manifest.json"
+DEFAULT_DISTANCES_CM = (30, 40, 50)
+START_TIME_NS = 1_700_000_000_000_000_000
+FRAME_PERIOD_NS = 33_333_333          # 30 fps RealSense; radar frames stamped at the same instants
+RADAR2WORLD = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 1.2], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+
+
+@dataclass(frozen=True)
+class CaptureResult:
+    """What happened to one capture: status is 'generated' or 'cached'; seconds of wall time."""
+
+    path: Path
+    status: str
+    seconds: float
+
+
+def _rigid(rotation: np.ndarray, translation_m) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = rotation, translation_m
+    return m
+
+
+def _photogrammetry2radar(rng: np.random.Generator) -> np.ndarray:
+    """A random proper rigid map (rotation 25-60 deg about a random axis, translation up to 0.5 m)."""
+    return _rigid(rotation_matrix(rng.normal(size=3), rng.uniform(25.0, 60.0)), rng.uniform(-0.5, 0.5, 3))
+
+
+def _radar_frames(scene, config: SynthConfig, rng: np.random.Generator):
+    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame; the scene is static, noise is per frame."""
+    antennas = load_antenna_array(all_elements=True)
+    freqs = frequencies_hz(config)
+    samples = visible_samples([p.tris_m for p in scene.parts], config.sample_spacing_m)
+    reflectivity = np.array([p.reflectivity for p in scene.parts])
+    amplitudes = surface_amplitudes(samples, reflectivity, config)
+    obj = simulate_frame(roughen(samples, config, rng), amplitudes, antennas.tx_m, antennas.rx_m, freqs)
+    power = float(np.mean(np.abs(obj) ** 2))
+    clutter = (clutter_frame(antennas.tx_m, antennas.rx_m, freqs, config, power, rng) if config.clutter
+               else np.zeros_like(obj))
+    for _ in range(config.frames):
+        noise = noise_frame(obj.shape, power, config.snr_db, rng)
+        yield obj + clutter + noise, obj + noise
+
+
+def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config: SynthConfig) -> None:
+    """Write every file of one capture into `capture_dir` (which must not exist yet)."""
+    distance_m = distance_cm / 100.0
+    scene = build_scene(object_name, distance_m)
+    capture_dir.mkdir(parents=True)
+    timestamps_ns = [START_TIME_NS + i * FRAME_PERIOD_NS for i in range(config.frames)]
+
+    radar_rng = capture_rng(config, object_name, distance_cm, "radar")
+    freqs = frequencies_hz(config)
+    for i, (raw, filtered) in enumerate(_radar_frames(scene, config, radar_rng)):
+        writer.write_radar_frame(capture_dir, i, raw, filtered, freqs, config.frames, timestamps_ns[i] // 1000)
+    writer.write_radar_calibration(capture_dir, writer.radar_grid(distance_m), config.frames, config.frequency_points)
+
+    camera_rng = capture_rng(config, object_name, distance_cm, "camera")
+    nominal = depth_camera.nominal_pose(config)
+    true_pose = depth_camera.perturbed_pose(nominal, config, camera_rng)
+    for i in range(config.frames):
+        frame = depth_camera.render(scene, true_pose, config, camera_rng)
+        writer.write_realsense_frame(capture_dir, i, frame.depth_mm, frame.mask, frame.rgb)
+    writer.write_realsense_meta(capture_dir, depth_camera.intrinsics(config), timestamps_ns)
+
+    photo2radar = _photogrammetry2radar(capture_rng(config, object_name, distance_cm, "photogrammetry"))
+    rs2radar = nominal.realsense2radar()
+    mesh_photo = (scene.tris_m - photo2radar[:3, 3]) @ photo2radar[:3, :3]     # R^T (p - t), row vectors
+    writer.write_mesh_obj(capture_dir / "photogrammetry" / "mesh_masked_smoothed.obj", mesh_photo)
+    writer.write_alignment(capture_dir, {"realsense2radar": rs2radar, "photogrammetry2radar": photo2radar,
+                                         "photogrammetry2realsense": np.linalg.inv(rs2radar) @ photo2radar,
+                                         "radar2world": np.array(RADAR2WORLD)})
+    writer.write_metadata(capture_dir, distance_m, scene.label)
+
+
+class _Manifest:
+    """Locked read-modify-write access to `<root>/synth_manifest.json`."""
+
+    def __init__(self, root: Path):
+        self.path = root / MANIFEST_NAME
+        self.lock_path = root / f".{MANIFEST_NAME}.lock"
+
+    def read(self) -> dict:
+        try:
+            return json.loads(self.path.read_text()).get("captures", {})
+        except (OSError, ValueError):
+            return {}
+
+    def record(self, key: str, entry: dict) -> None:
+        with open(self.lock_path, "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            captures = self.read()
+            captures[key] = entry
+            tmp = self.path.with_name(f".{MANIFEST_NAME}.{os.getpid()}.tmp")
+            tmp.write_text(json.dumps({"captures": captures}, indent=2, sort_keys=True))
+            os.replace(tmp, self.path)
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove_stale_temporaries(object_dir: Path, distance_cm: int) -> None:
+    """Delete leftovers of interrupted runs (hidden temp/old folders whose process is gone)."""
+    pattern = re.compile(rf"^\.{distance_cm}\.(tmp|old)-(\d+)-[0-9a-f]+$")
+    for entry in object_dir.glob(f".{distance_cm}.*"):
+        match = pattern.match(entry.name)
+        if match and not _pid_alive(int(match.group(2))):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def ensure_capture(root, object_name: str, distance_cm: int, config: SynthConfig = SynthConfig(),
+                   force: bool = False) -> CaptureResult:
+    """Generate one capture unless an up-to-date one (same hash in the manifest) already exists."""
+    start = time.perf_counter()
+    config.validate()
+    if object_name not in CATALOGUE:
+        raise ValueError(f"unknown object {object_name!r}; known: {', '.join(CATALOGUE)}")
+    if not DISTANCE_RANGE_CM[0] <= int(distance_cm) <= DISTANCE_RANGE_CM[1]:
+        raise ValueError(f"distance {distance_cm} cm is outside {DISTANCE_RANGE_CM[0]}..{DISTANCE_RANGE_CM[1]} cm")
+    root = Path(root)
+    target = root / object_name / str(int(distance_cm))
+    key, digest = f"{object_name}/{int(distance_cm)}", capture_hash(config, object_name, distance_cm)
+    manifest = _Manifest(root)
+    if not force and target.is_dir() and manifest.read().get(key, {}).get("hash") == digest:
+        return CaptureResult(target, "cached", time.perf_counter() - start)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_temporaries(target.parent, distance_cm)
+    token = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    tmp = target.parent / f".{distance_cm}.tmp-{token}"
+    try:
+        build_capture(tmp, object_name, int(distance_cm), config)
+        if target.exists():
+            old = target.parent / f".{distance_cm}.old-{token}"
+            os.rename(target, old)
+            os.rename(tmp, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.rename(tmp, target)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    seconds = time.perf_counter() - start
+    manifest.record(key, {"hash": digest, "config": config.to_dict(), "seconds": round(seconds, 3)})
+    return CaptureResult(target, "generated", seconds)
+
+
+def generate_capture(root, object_name: str, distance_cm: int, config: SynthConfig = SynthConfig(),
+                     force: bool = False) -> Path:
+    """Path of the capture `<root>/<object_name>/<distance_cm>`, generated if missing or stale."""
+    return ensure_capture(root, object_name, distance_cm, config, force).path
+
+
+def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, objects: Iterable[str] | None = None,
+                       config: SynthConfig = SynthConfig(), force: bool = False,
+                       log: Callable[[CaptureResult], None] | None = None) -> list[CaptureResult]:
+    """Ensure every (object, distance) capture; `objects=None` means the whole catalogue."""
+    results = []
+    for object_name in (list(objects) if objects is not None else list(CATALOGUE)):
+        for distance_cm in distances:
+            result = ensure_capture(root, object_name, int(distance_cm), config, force)
+            results.append(result)
+            if log is not None:
+                log(result)
+    return results
