@@ -3,7 +3,11 @@
 Kernels (one thread per point or voxel; points come from an (N, 3) array or from an x/y/z grid):
 * `_direct_kernel`: the plain direct sum, one sincos per antenna pair and frequency (the comparison baseline).
 * `_separable_kernel`: T + R sincos per point and frequency, then `a^T S b` as complex multiply-adds.
-* `_profile_kernel` + `_range_kernel`: range-compressed back-projection (see methods/range_compression.py).
+* `_tc_kernel` (CUDA default): blocks of 64 points; per frequency the real-split product
+  [cos|sin](k e_rx) (64 x 192, fp16) @ [[Sr, Si], [-Si, Sr]] (192 x 192, fp16, fp32 accumulation) on the tensor cores
+  (`wp.tile_matmul`), then a row-wise dot with the Tx steering in fp32 (`_prep_kernel` forms the per-point data).
+* `_profile_kernel` + `_range_kernel`: range-compressed back-projection (see methods/range_compression.py): profiles
+  in fp16 over the path window the volume needs only (fits L2), Tx steering in registers in chunks of 32.
 Phases use the same cancellation-free split as the numpy backend: |p - q| = |p| + e(p, q) with e in float32 and the
 common phase 2 k |p| in float64, reduced mod 2 pi.
 """
@@ -141,58 +145,183 @@ def _separable_kernel(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(d
         out[0, i] = total
 
 
-@wp.kernel
+TC_POINTS = wp.constant(64)        # points per block of the tensor-core kernel
+TC_ANT = wp.constant(96)           # antennas per side, padded (zero signal in the pads)
+TC_K = wp.constant(192)            # 2 * TC_ANT: [cos | sin] columns, [Re | Im] output columns
+TC_BLOCK = 256                     # threads per block
+RANGE_TILED = False                # range gather: blocks of 32 x 8 voxels (measured slower: 934 vs 836 ms), else flat
+
+
+@wp.func
+def _excess4(p: wp.vec4f, q: wp.vec4f) -> wp.float32:
+    """|p - q| - |p| for p = (x, y, z, |p|) and q = (x, y, z, |q|^2), metres (as `_excess_m`)."""
+    num = q[3] - 2.0 * (p[0] * q[0] + p[1] * q[1] + p[2] * q[2])
+    return num / (wp.sqrt(wp.max(p[3] * p[3] + num, 0.0)) + p[3])
+
+
+@wp.func
+def _reduced_phase(e: wp.float32, k: wp.float32) -> wp.float32:
+    """k e reduced to [-pi, pi] (two-constant Cody-Waite), so fast-math sin/cos stay accurate (abs err ~5e-7)."""
+    ph = k * e
+    n = wp.round(ph * 0.15915494309189535)
+    return (ph - n * 6.2831854820251465) + n * 1.7484556000744883e-07
+
+
+@wp.func
+def _cos_h(e: wp.float32, k: wp.float32) -> wp.float16:
+    return wp.float16(wp.cos(_reduced_phase(e, k)))
+
+
+@wp.func
+def _sin_h(e: wp.float32, k: wp.float32) -> wp.float16:
+    return wp.float16(wp.sin(_reduced_phase(e, k)))
+
+
+@wp.func
+def _tx_dot(yre: wp.float32, yim: wp.float32, e: wp.float32, k: wp.float32) -> wp.vec2f:
+    """(yre + j yim) * exp(j k e): one term of the row-wise dot with the Tx steering vector."""
+    ph = _reduced_phase(e, k)
+    c = wp.cos(ph)
+    s = wp.sin(ph)
+    return wp.vec2f(yre * c - yim * s, yre * s + yim * c)
+
+
+@wp.func
+def _cmul_gain(a: wp.vec2f, b: wp.vec2f, g: wp.float32) -> wp.vec2f:
+    return wp.vec2f(a[0] * b[0] - a[1] * b[1], a[0] * b[1] + a[1] * b[0]) * g
+
+
+@wp.kernel(enable_backward=False)
+def _prep_kernel(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.float64),
+                 y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
+                 cycles_per_m: wp.array(dtype=wp.float64), pts: wp.array(dtype=wp.vec4f),
+                 common: wp.array2d(dtype=wp.vec2f)):
+    """Per point: (x, y, z, |p|) in float32 and the common phasor exp(j 2 k |p|) per frequency (float64 reduced)."""
+    i = wp.tid()
+    p64 = _point(i, grid, points, x, y, z)
+    norm64 = wp.length(p64)
+    pts[i] = wp.vec4f(wp.float32(p64[0]), wp.float32(p64[1]), wp.float32(p64[2]), wp.float32(norm64))
+    for f in range(cycles_per_m.shape[0]):
+        common[f, i] = _phasor_cycles(norm64 * cycles_per_m[f])
+
+
+@wp.kernel(module="unique", module_options={"fast_math": True, "enable_backward": False})
+def _tc_kernel(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: wp.array(dtype=wp.vec4f),
+               k_rad_per_m: wp.array(dtype=wp.float32), gain: wp.array(dtype=wp.float32),
+               mat: wp.array3d(dtype=wp.float16), common: wp.array2d(dtype=wp.vec2f), sum_freqs: int,
+               out: wp.array2d(dtype=wp.vec2f)):
+    """Separable sum on the tensor cores, one block per TC_POINTS points.
+
+    Per frequency: A = [cos | sin](k e_rx) (fp16, phases reduced to [-pi, pi] before the fast sin/cos),
+    Y = A @ [[Sr, Si], [-Si, Sr]] / gain (fp16 operands, fp32 accumulation) = [Re(a^T S) | Im(a^T S)], then
+    sum_t Y_t exp(j k e_tx) in fp32, times the common phasor and the gain. Own module: fast math for this kernel only.
+    """
+    blk = wp.tid()
+    i0 = blk * TC_POINTS
+    p = wp.tile_load(pts, shape=TC_POINTS, offset=i0, storage="shared")
+    pb = wp.tile_broadcast(wp.tile_reshape(p, shape=(TC_POINTS, 1)), shape=(TC_POINTS, TC_ANT))
+    qr = wp.tile_load(rx, shape=TC_ANT, storage="shared")
+    qt = wp.tile_load(tx, shape=TC_ANT, storage="shared")
+    e_rx = wp.tile_map(_excess4, pb, wp.tile_broadcast(wp.tile_reshape(qr, shape=(1, TC_ANT)),
+                                                       shape=(TC_POINTS, TC_ANT)))
+    e_tx = wp.tile_map(_excess4, pb, wp.tile_broadcast(wp.tile_reshape(qt, shape=(1, TC_ANT)),
+                                                       shape=(TC_POINTS, TC_ANT)))
+    a = wp.tile_empty(shape=(TC_POINTS, TC_K), dtype=wp.float16, storage="shared")
+    y = wp.tile_empty(shape=(TC_POINTS, TC_K), dtype=wp.float32, storage="shared")
+    total = wp.tile_zeros(shape=TC_POINTS, dtype=wp.vec2f)
+    for f in range(k_rad_per_m.shape[0]):
+        k = k_rad_per_m[f]
+        wp.tile_assign(a, wp.tile_map(_cos_h, e_rx, k), offset=(0, 0))
+        wp.tile_assign(a, wp.tile_map(_sin_h, e_rx, k), offset=(0, TC_ANT))
+        m = wp.tile_load(mat[f], shape=(TC_K, TC_K), storage="shared", aligned=True)
+        wp.tile_matmul(a, m, y, alpha=1.0, beta=0.0)
+        y_re = wp.tile_view(y, offset=(0, 0), shape=(TC_POINTS, TC_ANT))
+        y_im = wp.tile_view(y, offset=(0, TC_ANT), shape=(TC_POINTS, TC_ANT))
+        acc = wp.tile_sum(wp.tile_map(_tx_dot, y_re, y_im, e_tx, k), axis=1)
+        val = wp.tile_map(_cmul_gain, acc, wp.tile_load(common[f], shape=TC_POINTS, offset=i0), gain[f])
+        if sum_freqs == 0:
+            wp.tile_store(out[f], val, offset=i0)
+        else:
+            total = total + val
+    if sum_freqs != 0:
+        wp.tile_store(out[0], total, offset=i0)
+
+
+@wp.kernel(enable_backward=False)
 def _profile_kernel(signal: wp.array2d(dtype=wp.vec2f), grid_index: wp.array(dtype=wp.int32),
-                    twiddle: wp.array(dtype=wp.vec2f), shift: wp.array(dtype=wp.vec2f),
-                    profiles: wp.array2d(dtype=wp.vec2f)):
-    """profiles[pair, m] = shift[m] sum_n signal[pair, n] twiddle[(i_n m) mod L]; column L repeats column 0."""
-    pair, m = wp.tid()
+                    twiddle: wp.array(dtype=wp.vec2f), shift: wp.array(dtype=wp.vec2f), m0: int,
+                    profiles: wp.array2d(dtype=wp.vec2h)):
+    """profiles[pair, j] = shift[m] sum_n signal[pair, n] twiddle[(i_n m) mod L], m = (m0 + j) mod L, in fp16."""
+    pair, j = wp.tid()
     n_samples = twiddle.shape[0]
+    m = (m0 + j) % n_samples
     acc = wp.vec2f(0.0, 0.0)
     for n in range(signal.shape[1]):
         acc += _cmul(signal[pair, n], twiddle[(grid_index[n] * m) % n_samples])
-    val = _cmul(shift[m], acc)
-    profiles[pair, m] = val
-    if m == 0:
-        profiles[pair, n_samples] = val
+    profiles[pair, j] = wp.vec2h(_cmul(shift[m], acc))
 
 
-@wp.kernel
-def _range_kernel(points: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.float64), y: wp.array(dtype=wp.float64),
+@wp.kernel(enable_backward=False)
+def _range_kernel(tiled: int, x: wp.array(dtype=wp.float64), y: wp.array(dtype=wp.float64),
                   z: wp.array(dtype=wp.float64),
                   rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
-                  carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32,
-                  profiles: wp.array2d(dtype=wp.vec2f), out: wp.array2d(dtype=wp.vec2f)):
-    """Voxel value: sum over pairs of carrier phasor times the linearly interpolated range profile."""
+                  carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
+                  profiles: wp.array2d(dtype=wp.vec2h), out: wp.array2d(dtype=wp.vec2f)):
+    """Voxel value: sum over pairs of carrier phasor times the linearly interpolated range profile.
+
+    Tx (padded to a multiple of TX_CHUNK, zero profiles in the pads) in chunks whose sample offsets and carrier
+    phasors stay in registers; the profile window starts at sample m0 (path lengths the volume can reach).
+    With `tiled`, each block of 256 threads takes 32 (x) x 8 (y) voxels of one z plane, so its 8 warps read the
+    same profile rows at nearly the same samples at the same time (L1 hits); else thread i is flat voxel i.
+    """
     i = wp.tid()
-    p64 = _point(i, 1, points, x, y, z)
+    nx = x.shape[0]
+    ny = y.shape[0]
+    ix = i % nx
+    iy = (i // nx) % ny
+    iz = i // (nx * ny)
+    if tiled != 0:
+        lane = i % 256
+        blk = i // 256
+        n_bx = (nx + 31) // 32
+        n_by = (ny + 7) // 8
+        ix = (blk % n_bx) * 32 + lane % 32
+        iy = ((blk // n_bx) % n_by) * 8 + lane // 32
+        iz = blk // (n_bx * n_by)
+        if ix >= nx or iy >= ny:
+            return
+        i = (iz * ny + iy) * nx + ix
+    p64 = wp.vec3d(x[ix], y[iy], z[iz])
     norm64 = wp.length(p64)
     p = wp.vec3f(p64)
     norm = wp.float32(norm64)
     n_tx = tx.shape[0]
-    n_samples = wp.float32(profiles.shape[1] - 1)
-    e_tx = vec_ant()
-    b_re = vec_ant()
-    b_im = vec_ant()
-    for t in range(n_tx):
-        e_tx[t] = _excess_m(p, norm, tx[t])
-        b_re[t] = wp.cos(k_carrier * e_tx[t])
-        b_im[t] = wp.sin(k_carrier * e_tx[t])
+    u_max = wp.float32(profiles.shape[1]) - 1.001
     acc = wp.vec2f(0.0, 0.0)
-    for r in range(rx.shape[0]):
-        e_rx = _excess_m(p, norm, rx[r])
-        base = (2.0 * norm + e_rx) * samples_per_m
-        gb = wp.vec2f(0.0, 0.0)
-        for t in range(n_tx):
-            u = base + e_tx[t] * samples_per_m
-            u = u - n_samples * wp.floor(u / n_samples)
-            iu = wp.min(wp.int32(u), wp.int32(n_samples) - 1)
-            w = u - wp.float32(iu)
-            g0 = profiles[r * n_tx + t, iu]
-            g = g0 + w * (profiles[r * n_tx + t, iu + 1] - g0)
-            gb += _cmul(g, wp.vec2f(b_re[t], b_im[t]))
-        phase = k_carrier * e_rx
-        acc += _cmul(wp.vec2f(wp.cos(phase), wp.sin(phase)), gb)
+    for chunk in range(n_tx // TX_CHUNK):
+        t0 = chunk * TX_CHUNK
+        u_tx = vec_chunk()
+        b_re = vec_chunk()
+        b_im = vec_chunk()
+        for j in range(TX_CHUNK):
+            e = _excess_m(p, norm, tx[t0 + j])
+            u_tx[j] = e * samples_per_m
+            b_re[j] = wp.cos(k_carrier * e)
+            b_im[j] = wp.sin(k_carrier * e)
+        for r in range(rx.shape[0]):
+            e_rx = _excess_m(p, norm, rx[r])
+            base = (2.0 * norm + e_rx) * samples_per_m - m0
+            row = r * n_tx + t0
+            gb = wp.vec2f(0.0, 0.0)
+            for j in range(TX_CHUNK):
+                u = wp.clamp(base + u_tx[j], 0.0, u_max)
+                iu = wp.int32(u)
+                w = u - wp.float32(iu)
+                g0 = wp.vec2f(profiles[row + j, iu])
+                g = g0 + w * (wp.vec2f(profiles[row + j, iu + 1]) - g0)
+                gb += _cmul(g, wp.vec2f(b_re[j], b_im[j]))
+            phase = k_carrier * e_rx
+            acc += _cmul(wp.vec2f(wp.cos(phase), wp.sin(phase)), gb)
     out[0, i] = _cmul(acc, _phasor_cycles(norm64 * carrier_cycles_per_m))
 
 
@@ -201,64 +330,168 @@ def _vec2(a: np.ndarray) -> np.ndarray:
     return np.stack([a.real, a.imag], axis=-1).astype(np.float32)
 
 
+def _ant4(ant_m: np.ndarray, n: int) -> np.ndarray:
+    """(n, 4) float32 rows (x, y, z, |q|^2), padded by repeating the last antenna."""
+    q = np.pad(ant_m, ((0, n - len(ant_m)), (0, 0)), mode="edge").astype(np.float32)
+    return np.column_stack([q, np.einsum("ai,ai->a", q, q)]).astype(np.float32)
+
+
 class _Inputs:
-    """Device copies of the antenna positions, wavenumbers and normalised signal (F, R, T)."""
+    """Device copies of one frame's antenna positions, wavenumbers and normalised signal (F, R, T).
+
+    Cached per frame (see `_frame_inputs`); the padded/fp16 layouts of each kernel are built on first use.
+    """
 
     def __init__(self, signal, freqs_hz, tx_m, rx_m, device: str):
         if len(tx_m) > MAX_ANTENNAS or len(rx_m) > MAX_ANTENNAS:
             raise ValueError(f"Warp kernels hold at most {MAX_ANTENNAS} antennas per side")
         self.device = _wp_device(device)
+        self.freqs_hz, self.tx_m, self.rx_m = freqs_hz, tx_m, rx_m
         scale = 1.0 / (len(rx_m) * len(tx_m))
+        self.sig = np.ascontiguousarray(np.moveaxis(signal, 2, 0)) * scale       # (F, R, T) complex
+        self.n_freqs = len(freqs_hz)
         self.tx = wp.array(tx_m.astype(np.float32), dtype=wp.vec3f, device=self.device)
         self.rx = wp.array(rx_m.astype(np.float32), dtype=wp.vec3f, device=self.device)
         self.k = wp.array((2 * np.pi * freqs_hz / C_M_PER_S).astype(np.float32), dtype=wp.float32, device=self.device)
         self.cycles = wp.array(2.0 * freqs_hz / C_M_PER_S, dtype=wp.float64, device=self.device)
-        sig = np.ascontiguousarray(np.moveaxis(signal, 2, 0)) * scale
-        self.signal = wp.array(_vec2(sig), dtype=wp.vec2f, device=self.device)
-        n_pad = -len(tx_m) % int(TX_CHUNK)
-        self.signal_padded = wp.array(_vec2(np.pad(sig, ((0, 0), (0, 0), (0, n_pad)))), dtype=wp.vec2f,
-                                      device=self.device)
-        self.tx_padded = wp.array(np.pad(tx_m, ((0, n_pad), (0, 0)), mode="edge").astype(np.float32),
-                                  dtype=wp.vec3f, device=self.device)
-        self.n_freqs = len(freqs_hz)
+        self._cache = {}
+
+    def _get(self, name, build):
+        if name not in self._cache:
+            self._cache[name] = build()
+        return self._cache[name]
+
+    @property
+    def signal(self):
+        return self._get("signal", lambda: wp.array(_vec2(self.sig), dtype=wp.vec2f, device=self.device))
+
+    def _n_pad(self):
+        return -len(self.tx_m) % int(TX_CHUNK)
+
+    @property
+    def signal_padded(self):
+        return self._get("signal_padded", lambda: wp.array(
+            _vec2(np.pad(self.sig, ((0, 0), (0, 0), (0, self._n_pad())))), dtype=wp.vec2f, device=self.device))
+
+    @property
+    def tx_padded(self):
+        return self._get("tx_padded", lambda: wp.array(
+            np.pad(self.tx_m, ((0, self._n_pad()), (0, 0)), mode="edge").astype(np.float32), dtype=wp.vec3f,
+            device=self.device))
+
+    def tc_tables(self):
+        """(rx4, tx4, gain, mat): padded antennas, per-frequency gain and fp16 [[Sr, Si], [-Si, Sr]] / gain."""
+        def build():
+            n = int(TC_ANT)
+            n_rx, n_tx = self.sig.shape[1:]
+            sig = np.zeros((self.n_freqs, n, n), dtype=np.complex128)
+            sig[:, :n_rx, :n_tx] = self.sig
+            gain = np.maximum(np.abs(sig.real).max(axis=(1, 2)), np.abs(sig.imag).max(axis=(1, 2)))
+            gain = np.where(gain > 0, gain, 1.0)
+            sig /= gain[:, None, None]
+            mat = np.block([[sig.real, sig.imag], [-sig.imag, sig.real]]).astype(np.float16)
+            dev = self.device
+            return (wp.array(_ant4(self.rx_m, n), dtype=wp.vec4f, device=dev),
+                    wp.array(_ant4(self.tx_m, n), dtype=wp.vec4f, device=dev),
+                    wp.array(gain.astype(np.float32), dtype=wp.float32, device=dev),
+                    wp.array(np.ascontiguousarray(mat), dtype=wp.float16, device=dev))
+        return self._get("tc", build)
 
 
-def _range_launch(inputs: _Inputs, freqs_hz, points, x, y, z, out):
+FRAME_CACHE_SIZE = 4
+_frames: dict = {}
+
+
+def _frame_inputs(signal, freqs_hz, tx_m, rx_m, device: str) -> _Inputs:
+    """Device inputs of a frame, cached by content (a CRC picks the slot, an exact comparison confirms it), so
+    repeated calls on one frame (MM-2FSK: one call per frame and prior; benchmarks) upload nothing."""
+    import zlib
+    parts = [np.ascontiguousarray(a) for a in (signal, freqs_hz, tx_m, rx_m)]
+    key = (device, tuple(a.shape for a in parts), tuple(a.dtype.str for a in parts),
+           zlib.crc32(b"".join(a.tobytes() for a in parts)))
+    hit = _frames.get(key)
+    if hit is not None and all(np.array_equal(a, b) for a, b in zip(parts, hit[0])):
+        return hit[1]
+    inputs = _Inputs(signal, freqs_hz, tx_m, rx_m, device)
+    _frames[key] = ([a.copy() for a in parts], inputs)
+    while len(_frames) > FRAME_CACHE_SIZE:
+        _frames.pop(next(iter(_frames)))
+    return inputs
+
+
+_buffers: dict = {}
+
+
+def _buffer(name, shape, dtype, dev):
+    """Pre-allocated device buffer reused between calls (outputs are copied back before a call returns)."""
+    key = (name, shape, dtype, dev)
+    if key not in _buffers:
+        for old in [k for k in _buffers if k[0] == name and k[3] == dev]:
+            del _buffers[old]
+        _buffers[key] = wp.empty(shape, dtype=dtype, device=dev)
+    return _buffers[key]
+
+
+def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
+    """Bounds of |p - rx| + |p - tx| over the box of the grid and all pairs, metres."""
+    lo = np.array([np.min(x_m), np.min(y_m), np.min(z_m)])
+    hi = np.array([np.max(x_m), np.max(y_m), np.max(z_m)])
+
+    def near_far(ant):
+        near = np.linalg.norm(np.clip(ant, lo, hi) - ant, axis=1)
+        far = np.linalg.norm(np.maximum(np.abs(ant - lo), np.abs(ant - hi)), axis=1)
+        return near.min(), far.max()
+    n_rx, f_rx = near_far(rx_m)
+    n_tx, f_tx = near_far(tx_m)
+    return n_rx + n_tx, f_rx + f_tx
+
+
+def _range_launch(inputs: _Inputs, freqs_hz, points, x, y, z, out, grid_m):
     """Upload the DFT tables once; return a function that builds the range profiles and gathers every voxel."""
     rplan = range_compression.plan(freqs_hz)
     if rplan is None:
         raise ValueError("range compression needs >= 2 distinct frequencies on an equidistant grid "
                          f"with df < c / {range_compression.MAX_PATH_M} m")
     dev = inputs.device
-    n_freqs, n_rx, n_tx = inputs.signal.shape
-    sig_pairs = inputs.signal.numpy().reshape(n_freqs, n_rx * n_tx, 2).transpose(1, 0, 2)
+    n_freqs, n_rx, n_tx_pad = inputs.signal_padded.shape
+    m0, n_window = range_compression.sample_window(rplan, *path_window_m(inputs.tx_m, inputs.rx_m, *grid_m))
+    sig_pairs = inputs.signal_padded.numpy().reshape(n_freqs, n_rx * n_tx_pad, 2).transpose(1, 0, 2)
     sig = wp.array(np.ascontiguousarray(sig_pairs), dtype=wp.vec2f, device=dev)
     m = np.arange(rplan.n_samples)
     twiddle = wp.array(_vec2(np.exp(2j * np.pi * m / rplan.n_samples)), dtype=wp.vec2f, device=dev)
     shift = wp.array(_vec2(range_compression.profile_shift(rplan)), dtype=wp.vec2f, device=dev)
     index = wp.array(rplan.grid_index.astype(np.int32), dtype=wp.int32, device=dev)
-    profiles = wp.empty((n_rx * n_tx, rplan.n_samples + 1), dtype=wp.vec2f, device=dev)
+    profiles = wp.empty((n_rx * n_tx_pad, n_window), dtype=wp.vec2h, device=dev)
     k_c = 2 * np.pi * rplan.f_carrier_hz / C_M_PER_S
-    gather_args = [points, x, y, z, inputs.rx, inputs.tx, float(k_c), 2.0 * rplan.f_carrier_hz / C_M_PER_S,
-                   float(rplan.samples_per_m), profiles, out]
+    gather_args = [int(RANGE_TILED), x, y, z, inputs.rx, inputs.tx_padded, float(k_c),
+                   2.0 * rplan.f_carrier_hz / C_M_PER_S, float(rplan.samples_per_m), float(m0), profiles, out]
+    nx, ny, nz = x.shape[0], y.shape[0], z.shape[0]
+    n_threads = 256 * ((nx + 31) // 32) * ((ny + 7) // 8) * nz if RANGE_TILED else out.shape[1]
 
     def run():
-        wp.launch(_profile_kernel, dim=(n_rx * n_tx, rplan.n_samples), inputs=[sig, index, twiddle, shift, profiles],
-                  device=dev)
-        wp.launch(_range_kernel, dim=out.shape[1], inputs=gather_args, device=dev)
+        wp.launch(_profile_kernel, dim=(n_rx * n_tx_pad, n_window), inputs=[sig, index, twiddle, shift, int(m0) % rplan.n_samples,
+                                                                           profiles], device=dev)
+        wp.launch(_range_kernel, dim=n_threads, inputs=gather_args, block_dim=256, device=dev)
         return out
     return run
 
 
+def default_kernel(device: str) -> str:
+    """The point/volume kernel used by the API: tensor cores on CUDA, the fp32 separable kernel on Warp-CPU."""
+    return "tc" if _wp_device(device) != "cpu" else "separable"
+
+
 def make_launch(signal, freqs_hz, tx_m, rx_m, *, device: str, kernel: str, points_m=None, grid_m=None,
-                sum_freqs: bool = False):
+                sum_freqs: bool = False, reuse: bool = False):
     """Upload inputs once; return a function that runs `kernel` and returns the device output (rows, N) vec2f.
 
-    kernel: "separable", "direct" or "range" (grid only; the range profiles are rebuilt on every call, as a new
-    frame needs). Points come from `points_m` (N, 3) or from `grid_m` = (x_m, y_m, z_m); with a grid the output
-    is summed over frequencies, flat in (z, y, x) order. The benchmark times the returned function.
+    kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct" or "range" (grid only; the range
+    profiles are rebuilt on every call, as a new frame needs). Points come from `points_m` (N, 3) or from
+    `grid_m` = (x_m, y_m, z_m); with a grid the output is summed over frequencies, flat in (z, y, x) order.
+    Frame inputs are cached by content; with `reuse` the output and work buffers are pre-allocated ones shared
+    between calls (the API copies the output back before returning). The benchmark times the returned function.
     """
-    inputs = _Inputs(signal, freqs_hz, tx_m, rx_m, device)
+    inputs = _frame_inputs(signal, freqs_hz, tx_m, rx_m, device)
     dev = inputs.device
     empty = wp.empty(0, dtype=wp.float64, device=dev)
     if grid_m is None:
@@ -267,9 +500,27 @@ def make_launch(signal, freqs_hz, tx_m, rx_m, *, device: str, kernel: str, point
         points, flag, sum_freqs = wp.empty(0, dtype=wp.vec3d, device=dev), 1, True
         x, y, z = (wp.array(v, dtype=wp.float64, device=dev) for v in grid_m)
     n_out = len(points_m) if grid_m is None else x.shape[0] * y.shape[0] * z.shape[0]
-    out = wp.empty((1 if sum_freqs else inputs.n_freqs, n_out), dtype=wp.vec2f, device=dev)
+    out_shape = (1 if sum_freqs else inputs.n_freqs, n_out)
+    out = _buffer("out", out_shape, wp.vec2f, dev) if reuse else wp.empty(out_shape, dtype=wp.vec2f, device=dev)
     if kernel == "range" and grid_m is not None:
-        return _range_launch(inputs, freqs_hz, points, x, y, z, out)
+        return _range_launch(inputs, freqs_hz, points, x, y, z, out, grid_m)
+    if kernel == "tc":
+        rx4, tx4, gain, mat = inputs.tc_tables()
+        if reuse:
+            pts = _buffer("pts", n_out, wp.vec4f, dev)
+            common = _buffer("common", (inputs.n_freqs, n_out), wp.vec2f, dev)
+        else:
+            pts = wp.empty(n_out, dtype=wp.vec4f, device=dev)
+            common = wp.empty((inputs.n_freqs, n_out), dtype=wp.vec2f, device=dev)
+        prep_args = [flag, points, x, y, z, inputs.cycles, pts, common]
+        tc_args = [pts, rx4, tx4, inputs.k, gain, mat, common, int(sum_freqs), out]
+        n_blocks = (n_out + int(TC_POINTS) - 1) // int(TC_POINTS)
+
+        def run_tc():
+            wp.launch(_prep_kernel, dim=n_out, inputs=prep_args, device=dev)
+            wp.launch_tiled(_tc_kernel, dim=[n_blocks], inputs=tc_args, block_dim=TC_BLOCK, device=dev)
+            return out
+        return run_tc
     if kernel == "direct":
         fn, args = _direct_kernel, [flag, points, x, y, z, inputs.rx, inputs.tx, inputs.k, inputs.signal]
     elif kernel == "separable":
@@ -286,20 +537,26 @@ def make_launch(signal, freqs_hz, tx_m, rx_m, *, device: str, kernel: str, point
 
 
 def _to_complex(out: wp.array) -> np.ndarray:
+    """Device (rows, N) vec2f -> host complex64 (rows, N): one copy back, reinterpreted without a conversion."""
     a = out.numpy()
-    return (a[..., 0] + 1j * a[..., 1]).astype(np.complex64)
+    if out.device.is_cpu:          # a view of the (reused) Warp buffer there: copy
+        a = a.copy()
+    return a.view(np.complex64)[..., 0]
 
 
-def correlate_warp(signal, freqs_hz, tx_m, rx_m, points_m, *, device: str, kernel: str = "separable",
+def correlate_warp(signal, freqs_hz, tx_m, rx_m, points_m, *, device: str, kernel: str | None = None,
                    sum_freqs: bool = False) -> np.ndarray:
-    """Correlation at points (N, 3) with a Warp kernel ("separable" or "direct"): complex64 (F, N) or (N,)."""
-    run = make_launch(signal, freqs_hz, tx_m, rx_m, device=device, kernel=kernel, points_m=points_m,
-                      sum_freqs=sum_freqs)
+    """Correlation at points (N, 3) with a Warp kernel ("tc", "separable" or "direct"; None: `default_kernel`):
+    complex64 (F, N) or (N,)."""
+    run = make_launch(signal, freqs_hz, tx_m, rx_m, device=device, kernel=kernel or default_kernel(device),
+                      points_m=points_m, sum_freqs=sum_freqs, reuse=True)
     res = _to_complex(run())
     return res[0] if sum_freqs else res
 
 
-def volume_warp(signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, *, device: str, kernel: str = "separable"):
-    """Frequency-summed correlation on the grid, complex64 (nz, ny, nx); kernel "separable", "direct" or "range"."""
-    run = make_launch(signal, freqs_hz, tx_m, rx_m, device=device, kernel=kernel, grid_m=(x_m, y_m, z_m))
+def volume_warp(signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, *, device: str, kernel: str | None = None):
+    """Frequency-summed correlation on the grid, complex64 (nz, ny, nx); kernel "tc", "separable", "direct" or
+    "range" (None: `default_kernel`)."""
+    run = make_launch(signal, freqs_hz, tx_m, rx_m, device=device, kernel=kernel or default_kernel(device),
+                      grid_m=(x_m, y_m, z_m), reuse=True)
     return _to_complex(run())[0].reshape(len(z_m), len(y_m), len(x_m))

@@ -9,6 +9,11 @@ two gathers and one complex multiply instead of one sincos per frequency.
 Linear interpolation of a tone at ν cycles/sample attenuates it by at most 1 - sinc^2-like (π ν)^2 / 2 at
 half-sample offsets; the profile's band reaches ν = 1 / (2 Q), so with Q = 16 the worst-case amplitude error is
 π^2 / (8 Q^2) = 0.48 % and the measured relative error over random scenes is ~0.2 %: RANGE_REL_TOL = 1e-2.
+
+The Warp kernels keep only the profile samples of the path lengths the volume can reach (`sample_window`: for the
+paper's box about 0.4-1.5 m of the 3.8 m period) and store them in fp16 (relative rounding <= 2^-11 = 0.05 %,
+unbiased, far under the interpolation error): 9024 pairs x ~580 samples x 4 B = 21 MB, resident in the H100's L2
+(50 MB), where the full float32 table (145 MB) streamed from HBM.
 """
 from __future__ import annotations
 
@@ -64,6 +69,14 @@ def worth_it(freqs_hz: np.ndarray, device: str) -> bool:
     On the numpy CPU path the per-frequency BLAS sum stays: numpy has no fast gather, so it is the faster one there.
     """
     return device != "cpu" and len(freqs_hz) >= RANGE_MIN_FREQS and plan(freqs_hz) is not None
+
+
+def sample_window(rplan: RangePlan, path_min_m: float, path_max_m: float, margin: int = 2) -> tuple[int, int]:
+    """(m0, n): the profile samples m0 .. m0 + n - 1 (taken mod L) cover the paths [path_min_m, path_max_m] with
+    `margin` samples either side, for linear interpolation between neighbours."""
+    m0 = int(np.floor(path_min_m * rplan.samples_per_m)) - margin
+    m1 = int(np.ceil(path_max_m * rplan.samples_per_m)) + margin
+    return m0, m1 - m0 + 1
 
 
 def profile_shift(rplan: RangePlan) -> np.ndarray:
