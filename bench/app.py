@@ -18,6 +18,7 @@ from bench import maroon
 from bench.errors import DatasetError
 from bench.grids import grid_for
 from bench.results import write_depth, write_results
+from metrics.evaluate import METRIC_COLUMNS, evaluate, ground_truth
 
 log = logging.getLogger("bench")
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
@@ -69,14 +70,19 @@ def run(cfg: DictConfig, out_dir: Path) -> list[dict]:
                                   threshold_db=float(cfg.threshold_db), **params)
         stem = f"{capture.object_name}_{capture.distance_cm}_{capture.radar.index:06d}"
         write_depth(out_dir, stem, rec.depth_m, rec.grid)
+        if capture.mesh is not None:
+            scores = evaluate(rec.depth_m, ground_truth(capture, rec.grid), faithful=bool(cfg.metrics.faithful))
+        else:
+            scores = dict.fromkeys(METRIC_COLUMNS, float("nan"))
+            log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
         row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index,
                "method": cfg.method.name, "freq": cfg.freq.name, "prior": cfg.prior.name,
                "f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
-               "runtime_ms": rec.timings_ms["total"], "device": rec.extra.get("device", cfg.device)}
+               "runtime_ms": rec.timings_ms["total"], "device": rec.extra.get("device", cfg.device), **scores}
         row.update({f"t_{stage}_ms": ms for stage, ms in rec.timings_ms.items() if stage != "total"})
         rows.append(row)
-        log.info("%s/%s: %d valid pixels, %.1f ms", capture.object_name, capture.distance_cm, row["valid_px"],
-                 row["runtime_ms"])
+        log.info("%s: %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", capture.name, row["valid_px"],
+                 row["runtime_ms"], scores["P_cm"], scores["C_s_cm"])
         write_results(out_dir / "results.csv", rows)   # after every capture: an interruption loses no row
     return rows
 

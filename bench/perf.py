@@ -10,7 +10,8 @@ the API call (uploads and the copy back included; the frame's inputs are cached 
 repeated calls on one frame upload only the points) and kernel_ms the device time alone (inputs resident, output
 left on the device), which is what the speedup over the plain kernel compares; the CUDA points and BP cases run
 the tensor-core kernel ("tc"), and separable_kernel_ms times the fp32 separable kernel beside it. Accuracy is the relative
-error against the float64 reference on 64 random points of the case. Writes results/perf_<device>.csv.
+error against the float64 reference on 64 random points of the case. Writes results/perf_<device>.csv, then
+the whole-frame timings of every method (bench.perf_frames) to results/perf_frames_<device>.csv.
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.antennas import load_antenna_array
+from bench.perf_frames import run_frames, write_rows
 from methods.correlate import C_M_PER_S, correlate, correlate_reference, correlate_volume, resolve_device
 
 ALL_FREQS_HZ = np.linspace(72e9, 82e9, 128)
@@ -169,6 +171,7 @@ def main(argv=None) -> None:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--cpu-z", type=int, default=2, help="z-planes run for CPU volume cases (scaled to all)")
     parser.add_argument("--out", default="results")
+    parser.add_argument("--no-frames", action="store_true", help="skip the whole-frame timings (bench.perf_frames)")
     args = parser.parse_args(argv)
     device = resolve_device(args.device)
     rows = run_cases(device, args.sizes, args.repeat, args.cpu_z)
@@ -179,6 +182,9 @@ def main(argv=None) -> None:
         writer.writeheader()
         writer.writerows({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows)
     print(f"wrote {path}")
+    if not args.no_frames:
+        bp_nz = 201 if device == "cuda" else args.cpu_z
+        write_rows(run_frames(device, args.repeat, bp_nz), Path(args.out) / f"perf_frames_{device}.csv")
 
 
 if __name__ == "__main__":

@@ -11,8 +11,6 @@ import dataclasses
 
 import pytest
 
-from bench.synth import SynthConfig, generate_capture
-from bench.synth.config import capture_hash
 
 SYNTH_FIXTURE_CAPTURES = (("01_plate", 30), ("03_sphere", 30))
 
@@ -20,6 +18,8 @@ SYNTH_FIXTURE_CAPTURES = (("01_plate", 30), ("03_sphere", 30))
 @pytest.fixture(scope="session")
 def synth_root(tmp_path_factory):
     """Dataset root with the default-config captures listed in SYNTH_FIXTURE_CAPTURES."""
+    from bench.synth import generate_capture   # imported here: the GPU machine runs tests without Open3D
+
     root = tmp_path_factory.mktemp("synth_default")
     for object_name, distance_cm in SYNTH_FIXTURE_CAPTURES:
         generate_capture(root, object_name, distance_cm)
@@ -29,6 +29,9 @@ def synth_root(tmp_path_factory):
 @pytest.fixture(scope="session")
 def synth_capture(tmp_path_factory):
     """Factory: path of a capture generated with `SynthConfig(**config_overrides)`, one root per configuration."""
+    from bench.synth import SynthConfig, generate_capture
+    from bench.synth.config import capture_hash
+
     base = tmp_path_factory.mktemp("synth_custom")
 
     def make(object_name: str = "01_plate", distance_cm: int = 30, **config_overrides):
