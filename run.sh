@@ -39,8 +39,7 @@ job=${1:-}
 case "$job" in
   demo)
     setup
-    .venv/bin/python -m bench.synth --out data/synthetic "$@"
-    .venv/bin/python -m bench.inspect data/synthetic
+    .venv/bin/python -m bench.demo "$@"
     ;;
   test)
     setup
