@@ -41,7 +41,8 @@ def _ensure_synthetic(dataset: DictConfig, root: Path) -> None:
     from bench.synth import SynthConfig, generate_catalogue
 
     objects = None if dataset.generate.objects is None else list(dataset.generate.objects)
-    generate_catalogue(root, distances=list(dataset.generate.distances), objects=objects, config=SynthConfig())
+    generate_catalogue(root, distances=list(dataset.generate.distances), objects=objects, config=SynthConfig(),
+                       log=lambda r: log.info("synthetic %s: %s (%.1f s)", r.path, r.status, r.seconds))
 
 
 def _parts(prior: str) -> tuple[str, ...]:

@@ -16,7 +16,6 @@ the whole-frame timings of every method (bench.perf_frames) to results/perf_fram
 from __future__ import annotations
 
 import argparse
-import csv
 import statistics
 import time
 from pathlib import Path
@@ -175,13 +174,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     device = resolve_device(args.device)
     rows = run_cases(device, args.sizes, args.repeat, args.cpu_z)
-    path = Path(args.out) / f"perf_{device}.csv"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
-        writer.writeheader()
-        writer.writerows({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows)
-    print(f"wrote {path}")
+    write_rows(rows, Path(args.out) / f"perf_{device}.csv", columns=CSV_COLUMNS, digits=6)
     if not args.no_frames:
         bp_nz = 201 if device == "cuda" else args.cpu_z
         write_rows(run_frames(device, args.repeat, bp_nz), Path(args.out) / f"perf_frames_{device}.csv")

@@ -94,13 +94,14 @@ def run_frames(device: str, repeat: int, bp_nz: int) -> list[dict]:
     return rows
 
 
-def write_rows(rows: list[dict], path: Path) -> None:
-    columns = list(dict.fromkeys(k for r in rows for k in r))
+def write_rows(rows: list[dict], path: Path, columns: list[str] | None = None, digits: int = 4) -> None:
+    """Write benchmark rows as CSV, floats to `digits` significant digits."""
+    columns = columns or list(dict.fromkeys(k for r in rows for k in r))
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=columns)
         writer.writeheader()
-        writer.writerows({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows)
+        writer.writerows({k: (f"{v:.{digits}g}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows)
     print(f"wrote {path}")
 
 
