@@ -12,9 +12,10 @@ from pathlib import Path
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import maroon
+from bench.antennas import load_antenna_array
 from bench.errors import DatasetError
 from bench.grids import grid_for
 from bench.results import write_depth, write_results
@@ -61,10 +62,13 @@ def run(cfg: DictConfig, out_dir: Path) -> list[dict]:
     targets_ghz = None if cfg.freq.f_ghz is None else [float(f) for f in cfg.freq.f_ghz]
     grid_override = None if cfg.grid.override is None else OmegaConf.to_container(cfg.grid.override)
     params = OmegaConf.to_container(cfg.method.params)
+    antenna_files = cfg.dataset.antennas
+    antennas = load_antenna_array(*(None if f is None else to_absolute_path(str(f))
+                                    for f in (antenna_files.tx_file, antenna_files.rx_file)))
     rows = []
     for capture_dir in _capture_dirs(cfg.dataset, root):
         capture = maroon.read_capture(capture_dir, frame=int(cfg.dataset.frame), parts=_parts(cfg.prior.name),
-                                      empty_filtered=bool(cfg.dataset.empty_filtered))
+                                      empty_filtered=bool(cfg.dataset.empty_filtered), antennas=antennas)
         grid = grid_for(capture, grid_override)
         rec = methods.reconstruct(capture, method=cfg.method.name, freq=targets_ghz, prior=cfg.prior.name,
                                   scalar_prior_m=float(cfg.prior.scalar_m), device=cfg.device, grid=grid,
@@ -95,6 +99,9 @@ def main(cfg: DictConfig) -> None:
         run(cfg, out_dir)
     except DatasetError as err:
         print(f"error: {err}", file=sys.stderr)
+        sys.exit(2)
+    except MissingMandatoryValue as err:
+        print(f"error: the setting '{err.full_key}' is required (e.g. {err.full_key}=/path/to/maroon)", file=sys.stderr)
         sys.exit(2)
     except ValueError as err:  # invalid combination of method, frequencies and prior
         print(f"error: {err}", file=sys.stderr)
