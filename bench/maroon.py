@@ -287,6 +287,14 @@ def find_mesh(photogrammetry_dir: Path) -> Path:
     raise DatasetError(photogrammetry_dir, f"no mesh file (looked for {', '.join(MESH_CANDIDATES)})")
 
 
+def _obj_face_lines(path: Path) -> int | None:
+    """Number of face lines (`f ...`) of an OBJ file, None for other formats: Open3D skips broken faces silently."""
+    if path.suffix.lower() != ".obj":
+        return None
+    text = path.read_bytes()
+    return text.count(b"\nf ") + text.startswith(b"f ")
+
+
 def read_mesh(path: Path) -> Mesh:
     """A triangle mesh via Open3D (imported here only, so the methods never need it)."""
     import open3d as o3d
@@ -301,6 +309,10 @@ def read_mesh(path: Path) -> Mesh:
         raise DatasetError(path, "mesh has non-finite vertex coordinates")
     if triangles.min() < 0 or triangles.max() >= len(vertices):
         raise DatasetError(path, "mesh has triangle indices outside its vertex list")
+    faces = _obj_face_lines(path)
+    if faces is not None and len(triangles) < faces:
+        raise DatasetError(path, f"mesh file has {faces} face lines but only {len(triangles)} triangles could be "
+                                 "read (truncated or malformed faces)")
     return Mesh(vertices=vertices, triangles=triangles, path=path)
 
 

@@ -1,5 +1,6 @@
 """Depth filtering shared by all methods (paper section III-B): keep pixels whose magnitude is within
-`threshold_db` of the image maximum (default 14 dB, MAROON_FORMAT.md section 7); the rest become NaN."""
+`threshold_db` of the image maximum (default 14 dB, MAROON_FORMAT.md section 7); the rest become NaN.
+A pixel of zero magnitude has no phase and no peak, so it is never kept (an all-zero frame gives no depth)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,12 +9,13 @@ DEFAULT_THRESHOLD_DB = 14.0
 
 
 def keep_mask(magnitude: np.ndarray, threshold_db: float | None = DEFAULT_THRESHOLD_DB) -> np.ndarray:
-    """True where `magnitude` (linear, NaN = not evaluated) >= max * 10^(-threshold_db/20).
+    """True where `magnitude` (linear, NaN = not evaluated) > 0 and >= max * 10^(-threshold_db/20).
 
-    `threshold_db=None` keeps every evaluated (finite) pixel. The threshold is in dB below the maximum (positive).
+    `threshold_db=None` keeps every evaluated pixel of nonzero magnitude. The threshold is in dB below the maximum
+    (positive).
     """
     magnitude = np.asarray(magnitude)
-    finite = np.isfinite(magnitude)
+    finite = np.isfinite(magnitude) & (magnitude > 0)
     if threshold_db is None or not finite.any():
         return finite
     if threshold_db < 0:

@@ -1,0 +1,76 @@
+"""`python -m bench.stress [--quick] [--out results/stress]`: run every stress experiment, write CSVs, PNGs
+and summary.md into OUT. The full report takes about two minutes on two cores; `--quick` (for tests) seconds."""
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench.stress import hostile, noise, plots, precision, prior_degradation, wrapping
+from bench.stress.summary import write_summary
+from bench.synth import SynthConfig, generate_capture
+
+FULL = {"distances_m": (0.2, 0.3, 0.4, 0.5, 0.6), "grid_sizes": (11, 61, 151), "n_ref": 48,
+        "snrs_db": tuple(range(-10, 45, 5)), "noise_configs": ("d05", "d10"),
+        "realisations": {"point": 400, "plate": 60}, "knob_values": None, "repetitions": 3}
+QUICK = {"distances_m": (0.2, 0.6), "grid_sizes": (11, 41), "n_ref": 16, "snrs_db": (-10, 0, 20, 40),
+         "noise_configs": ("d05",), "realisations": {"point": 60, "plate": 8}, "knob_values": 3, "repetitions": 1}
+
+
+def _knobs(n_values: int | None) -> dict:
+    """The prior-degradation sweep; with n_values, the first, a middle and the last value of each knob."""
+    if n_values is None:
+        return prior_degradation.KNOBS
+    return {k: tuple(v[i] for i in np.unique(np.linspace(0, len(v) - 1, n_values).round().astype(int)))
+            for k, v in prior_degradation.KNOBS.items()}
+
+
+def run(out: Path, quick: bool, seed: int = 0, log=print) -> dict[str, list[dict]]:
+    """Run all experiments, write OUT/<name>.csv, OUT/<name>.png and OUT/summary.md; return the rows."""
+    size = QUICK if quick else FULL
+    out.mkdir(parents=True, exist_ok=True)
+    results, seconds = {}, {}
+
+    def step(name, compute):
+        start = time.perf_counter()
+        results[name] = compute()
+        seconds[name] = time.perf_counter() - start
+        pd.DataFrame(results[name]).to_csv(out / f"{name}.csv", index=False, float_format="%.6g")
+        log(f"{name}: {len(results[name])} rows in {seconds[name]:.1f} s")
+
+    step("precision", lambda: precision.precision_rows(size["distances_m"], size["grid_sizes"],
+                                                       precision.available_devices(), size["n_ref"], seed))
+    step("wrapping", lambda: wrapping.wrapping_rows(wrapping.offset_ratios(quick)))
+    step("wrapping_boundaries", lambda: wrapping.boundaries(results["wrapping"]))
+    step("noise", lambda: noise.noise_rows(size["snrs_db"], size["noise_configs"], size["realisations"], seed))
+    step("prior_degradation", lambda: prior_degradation.degradation_rows(
+        prior_degradation.build(), _knobs(size["knob_values"]), size["repetitions"], seed))
+    step("prior_breaks", lambda: prior_degradation.break_points(results["prior_degradation"]))
+    with tempfile.TemporaryDirectory() as tmp:
+        source = generate_capture(Path(tmp) / "source", "01_plate", 30, SynthConfig(frequency_points=16, seed=seed))
+        step("hostile", lambda: hostile.hostile_rows(source, Path(tmp) / "work"))
+    for name, plot in (("precision", plots.plot_precision), ("wrapping", plots.plot_wrapping),
+                       ("noise", plots.plot_noise), ("prior_degradation", plots.plot_prior)):
+        plot(results[name], out / f"{name}.png")
+    write_summary(results, seconds, quick, out / "summary.md")
+    return results
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench.stress", description=__doc__)
+    parser.add_argument("--out", type=Path, default=Path("results/stress"), help="output folder")
+    parser.add_argument("--quick", action="store_true", help="small sweeps (seconds), for tests")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    start = time.perf_counter()
+    run(args.out, args.quick, args.seed)
+    print(f"stress report written to {args.out} in {time.perf_counter() - start:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
