@@ -52,18 +52,25 @@ def _transform(capture: Capture, key: str) -> np.ndarray:
     return capture.transforms[key]
 
 
-def prior_image_m(capture: Capture, source: str, grid: RadarGrid) -> np.ndarray:
-    """Per-pixel prior (ny, nx) in metres on `grid` from 'realsense' or 'photogrammetry'; NaN = no prior."""
+def prior_image_m(capture: Capture, source: str, grid: RadarGrid, device: str = "cpu") -> np.ndarray:
+    """Per-pixel prior (ny, nx) in metres on `grid` from 'realsense' or 'photogrammetry'; NaN = no prior.
+
+    device="cuda": rasterised on the GPU, returned as a `methods.prior_warp.DevicePrior` (np.asarray copies it)."""
+    if device == "cuda":
+        from methods import prior_warp
+        realsense_prior, mesh_prior = prior_warp.realsense_prior_device, prior_warp.mesh_prior_device
+    else:
+        realsense_prior, mesh_prior = realsense_prior_m, mesh_prior_m
     notes = f" ({'; '.join(capture.notes)})" if capture.notes else ""
     if source == "realsense":
         if capture.realsense is None:
             raise ValueError(f"prior='realsense' needs a RealSense depth frame, but capture {capture.name} "
                              f"has none{notes}")
-        return realsense_prior_m(capture.realsense, _transform(capture, "realsense2radar"), grid)
+        return realsense_prior(capture.realsense, _transform(capture, "realsense2radar"), grid)
     if capture.mesh is None:
         raise ValueError(f"prior='photogrammetry' needs the photogrammetry mesh, but capture {capture.name} "
                          f"has none{notes}")
-    return mesh_prior_m(capture.mesh, _transform(capture, "photogrammetry2radar"), grid)
+    return mesh_prior(capture.mesh, _transform(capture, "photogrammetry2radar"), grid)
 
 
 def frequency_indices(freqs_hz: np.ndarray, freq: str | Sequence[float] | None) -> np.ndarray:
@@ -95,12 +102,30 @@ def _check(method: str, freq: object, n_freqs: int, prior: str | float | None, p
         raise ValueError("band_m sets BP's search band around a prior; give a prior as well")
 
 
+def _check_frequencies_hz(capture: Capture, freqs_hz: np.ndarray) -> None:
+    """Refuse a frequency vector that is not finite or not in Hz (e.g. in GHz)."""
+    if freqs_hz.size == 0:
+        raise ValueError(f"capture {capture.name} has no frequencies")
+    if not np.all(np.isfinite(freqs_hz)) or freqs_hz.min() < 1e9:
+        raise ValueError(f"the frequencies of capture {capture.name} must be finite and in Hz (>= 1 GHz), found "
+                         f"{freqs_hz.min():g}-{freqs_hz.max():g} (in GHz? multiply by 1e9)")
+
+
+def _check_signal(capture: Capture, signal: np.ndarray) -> None:
+    """Refuse a radar frame with NaN or Inf samples (it would turn every depth into a silent NaN)."""
+    if not np.all(np.isfinite(signal)):
+        raise ValueError(f"the radar frame of capture {capture.name} has NaN or Inf samples")
+
+
 def _warm_up(signal: np.ndarray, freqs_hz: np.ndarray, capture: Capture, device: str, method: str) -> None:
     """Compile the device kernels on a tiny problem so that the timed run excludes compilation."""
     tx_m, rx_m = capture.antennas.tx_m, capture.antennas.rx_m
     correlate(signal, freqs_hz, tx_m, rx_m, np.array([[0.0, 0.0, 0.3]]), device=device)
     if method == "bp":
         correlate_volume(signal, freqs_hz, tx_m, rx_m, [0.0], [0.0], [0.3, 0.301], device=device)
+    if method == "mm2fsk" and device == "cuda":
+        from methods import prior_warp
+        prior_warp.load(device)
 
 
 def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | None,
@@ -114,16 +139,23 @@ def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | Non
     metres (2FSK/3FSK start from it; BP searches a band around it). grid: overrides the frame's grid.
     params: threshold_db (filter, dB below the maximum, default 14; None = off); scalar_prior_m (the scalar
     prior of 2FSK/3FSK when prior='none', default 0.40 m; other methods ignore it); band_m (BP with a prior).
+    A sensor prior that covers no radar pixel (empty mask, object outside the grid) gives an explicit all-invalid
+    result: every depth NaN and `extra["invalid_reason"]` saying why; so does a frame without signal (all
+    zero). `invalid_reason` is None when some pixel is valid. A frame with NaN/Inf
+    samples or frequencies not in Hz raises ValueError.
     """
     frame = capture.radar
     if frame is None:
         raise ValueError(f"capture {capture.name} has no radar frame loaded")
+    _check_frequencies_hz(capture, np.asarray(frame.freqs_hz, dtype=np.float64))
     indices = frequency_indices(frame.freqs_hz, freq)
     prior_value = parse_prior(prior)
+    invalid_reason = None
     _check(method, freq, len(indices), prior_value, params)
     device = resolve_device(device)
     grid = grid or frame.grid
     signal = np.ascontiguousarray(frame.signal[:, :, indices])
+    _check_signal(capture, signal)
     freqs_hz = frame.freqs_hz[indices]
     if device != "cpu":
         _warm_up(signal, freqs_hz, capture, device, method)
@@ -133,9 +165,10 @@ def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | Non
     antennas = capture.antennas
     if prior_value in SENSOR_PRIORS:
         with timer.stage("prior"):
-            prior_m = prior_image_m(capture, prior_value, grid)
-        if not np.isfinite(prior_m).any():
-            raise ValueError(f"the {prior_value} prior of capture {capture.name} covers no radar pixel")
+            prior_m = prior_image_m(capture, prior_value, grid, device if method == "mm2fsk" else "cpu")
+        # an explicit all-invalid result (extra["invalid_reason"]) below; a GPU prior knows its covered count
+        if not (prior_m.n_covered if hasattr(prior_m, "n_covered") else np.isfinite(prior_m).any()):
+            invalid_reason = f"the {prior_value} prior of capture {capture.name} covers no radar pixel"
     else:
         prior_m = prior_value
     if method == "bp":
@@ -148,5 +181,7 @@ def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | Non
         run = reconstruct_2fsk if method == "2fsk" else reconstruct_3fsk
         result = run(signal, freqs_hz, antennas, grid, prior_m=scalar_prior_m if prior_m is None else prior_m,
                      device=device, **params)
-    result.extra.update(freq=freq, prior=prior, device=device)
+    if invalid_reason is None and not result.valid.any():
+        invalid_reason = "no pixel has a nonzero magnitude within the filter threshold (a frame without signal?)"
+    result.extra.update(freq=freq, prior=prior, device=device, invalid_reason=invalid_reason)
     return result

@@ -47,6 +47,10 @@ def peak_depth_m(magnitude: np.ndarray, z_first_m: np.ndarray | float, dz_m: flo
 
 def _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, device, timer):
     """Depth and max projection (ny, nx) from the rectangular volume x_m x y_m (descending) x z_m."""
+    if device != "cpu":              # Warp: argmax + parabola on the device; only the (ny, nx) maps come back
+        from methods.correlate import volume_peak_depth
+        return volume_peak_depth(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m, grid.y_m[::-1], z_m,
+                                 device=device, timer=timer)
     with timer.stage("correlate"):
         volume = correlate_volume(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m, grid.y_m[::-1], z_m,
                                   device=device)

@@ -117,3 +117,20 @@ def correlate_volume(signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, *, device: str
         plane_m = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)], axis=1)
         out[iz] = correlate(signal, freqs_hz, tx_m, rx_m, plane_m, sum_freqs=True, device=device).reshape(xx.shape)
     return out
+
+
+def volume_peak_depth(signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, *, device: str, timer=None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """`correlate_volume` (method "auto") followed by `methods.bp.peak_depth_m` over z, on a Warp device: the
+    volume stays on the device and only (depth_m, max projection), each float64 (ny, nx), come back.
+    z_m must be equidistant (the BP grid). `timer` (StageTimer) gets the stages "correlate" and "depth"."""
+    signal, freqs_hz, tx_m, rx_m = _check_inputs(signal, freqs_hz, tx_m, rx_m)
+    x_m, y_m, z_m = (np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (x_m, y_m, z_m))
+    device = resolve_device(device)
+    if device == "cpu":
+        raise ValueError("volume_peak_depth runs on Warp devices ('cuda', 'warp-cpu')")
+    from methods import backend_warp, range_compression
+    kernel = "range" if range_compression.worth_it(freqs_hz, device) else None
+    dz_m = float(z_m[1] - z_m[0]) if len(z_m) > 1 else 0.0
+    return backend_warp.volume_peak_warp(signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m, device=device,
+                                         kernel=kernel, timer=timer)

@@ -28,6 +28,10 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
         raise ValueError(f"MM-2FSK needs exactly two frequencies, got {len(freqs_hz)}")
     if prior_depth_m.shape != grid.image_shape:
         raise ValueError(f"prior shape {prior_depth_m.shape} does not match the radar image {grid.image_shape}")
+    if hasattr(prior_depth_m, "n_covered"):          # a GPU prior (methods.prior_warp): the frame stays there
+        from methods.prior_warp import reconstruct_mm2fsk_device
+        return reconstruct_mm2fsk_device(signal, freqs_hz, antennas, grid, prior_depth_m, threshold_db=threshold_db,
+                                         timer=timer)
     timer = timer or StageTimer()
     has_prior = np.isfinite(prior_depth_m)
     x_m, y_m = grid.pixel_xy_m()
