@@ -1,24 +1,34 @@
 """`python -m bench`: one method x frequency configuration x prior over the captures of a dataset (Hydra app).
 
-Writes `results.csv` (one row per evaluated capture frame) and `depth/<object>_<distance>_<frame>.png` + `.json`
-into the run directory (DESIGN.md section 3). Timings exclude file I/O and one-time kernel compilation.
+Writes `results.csv` (one row per evaluated capture frame), `depth/<object>_<distance>_<frame>.png` + `.json` and
+`arrays.h5` (per capture: depth_m, magnitude, gt_depth_m) into the run directory (DESIGN.md section 3). Timings
+exclude file I/O and one-time kernel compilation. With `store.dir` set (the default), every cell is looked up in
+the result store first (bench.store) and only missing cells are computed. Multiruns (`-m`, e.g.
+`+experiment=table3`) merge their rows into the sweep root (bench.sweep).
 """
 from __future__ import annotations
 
+import functools
 import logging
+import os
+import socket
 import sys
+import tempfile
 from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import maroon
 from bench.antennas import load_antenna_array
+from bench.capture import Capture, RadarGrid
 from bench.errors import DatasetError
 from bench.grids import grid_for
 from bench.results import write_depth, write_results
+from bench.store import Store, capture_files, code_version, write_arrays
 from metrics.evaluate import METRIC_COLUMNS, evaluate, ground_truth
 
 log = logging.getLogger("bench")
@@ -53,48 +63,108 @@ def _parts(prior: str) -> tuple[str, ...]:
     return tuple(parts)
 
 
+def _antenna_files(cfg: DictConfig) -> tuple[str | None, str | None]:
+    files = cfg.dataset.antennas
+    return tuple(None if f is None else to_absolute_path(str(f)) for f in (files.tx_file, files.rx_file))
+
+
+@functools.lru_cache(maxsize=16)   # a joblib worker runs many cells on the same captures
+def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
+                  antenna_files: tuple[str | None, str | None]) -> Capture:
+    return maroon.read_capture(capture_dir, frame=frame, parts=parts, empty_filtered=empty_filtered,
+                               antennas=load_antenna_array(*antenna_files))
+
+
+def _container(node):
+    return None if node is None else OmegaConf.to_container(node)
+
+
+def _cell(cfg: DictConfig, device: str) -> dict:
+    """Everything but the capture that determines a cell's result (the store key's configuration part)."""
+    return {"method": cfg.method.name, "params": OmegaConf.to_container(cfg.method.params),
+            "f_ghz": _container(cfg.freq.f_ghz), "prior": cfg.prior.name,
+            "scalar_prior_m": float(cfg.prior.scalar_m), "grid": _container(cfg.grid.override),
+            "threshold_db": float(cfg.threshold_db), "frame": int(cfg.dataset.frame),
+            "empty_filtered": bool(cfg.dataset.empty_filtered), "faithful": bool(cfg.metrics.faithful),
+            "device": device, "code": code_version()}
+
+
+def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str) -> tuple[dict, dict]:
+    """Reconstruct and evaluate one capture: (row without identification columns, arrays)."""
+    import methods
+
+    targets_ghz = None if cfg.freq.f_ghz is None else [float(f) for f in cfg.freq.f_ghz]
+    rec = methods.reconstruct(capture, method=cfg.method.name, freq=targets_ghz, prior=cfg.prior.name,
+                              scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid,
+                              threshold_db=float(cfg.threshold_db), **OmegaConf.to_container(cfg.method.params))
+    if capture.mesh is not None:
+        gt = ground_truth(capture, rec.grid)
+        scores, gt_depth_m = evaluate(rec.depth_m, gt, faithful=bool(cfg.metrics.faithful)), gt.depth_m
+    else:
+        scores, gt_depth_m = dict.fromkeys(METRIC_COLUMNS, float("nan")), rec.depth_m * float("nan")
+        log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
+    row = {"f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
+           "runtime_ms": rec.timings_ms["total"], "device": rec.extra.get("device", device), **scores}
+    row.update({f"t_{stage}_ms": ms for stage, ms in rec.timings_ms.items() if stage != "total"})
+    return row, {"depth_m": rec.depth_m, "magnitude": rec.magnitude, "gt_depth_m": gt_depth_m}
+
+
+def _grid_attrs(grid: RadarGrid) -> dict:
+    return {"bb_min_m": list(grid.bb_min_m), "bb_max_m": list(grid.bb_max_m), "grid_size": list(grid.size)}
+
+
 def run(cfg: DictConfig, out_dir: Path) -> list[dict]:
     """Evaluate every capture of the configured dataset; returns the result rows (also written to disk)."""
-    import methods
+    from methods.correlate import resolve_device
 
     root = Path(to_absolute_path(str(cfg.dataset.root)))
     _ensure_synthetic(cfg.dataset, root)
-    targets_ghz = None if cfg.freq.f_ghz is None else [float(f) for f in cfg.freq.f_ghz]
-    grid_override = None if cfg.grid.override is None else OmegaConf.to_container(cfg.grid.override)
-    params = OmegaConf.to_container(cfg.method.params)
-    antenna_files = cfg.dataset.antennas
-    antennas = load_antenna_array(*(None if f is None else to_absolute_path(str(f))
-                                    for f in (antenna_files.tx_file, antenna_files.rx_file)))
+    store = None if cfg.store.dir is None else Store(to_absolute_path(str(cfg.store.dir)))
+    device = resolve_device(cfg.device)
+    cell = _cell(cfg, device)
+    grid_override = _container(cfg.grid.override)
+    frame, empty_filtered, parts = int(cfg.dataset.frame), bool(cfg.dataset.empty_filtered), _parts(cfg.prior.name)
+    out_dir.mkdir(parents=True, exist_ok=True)
     rows = []
     for capture_dir in _capture_dirs(cfg.dataset, root):
-        capture = maroon.read_capture(capture_dir, frame=int(cfg.dataset.frame), parts=_parts(cfg.prior.name),
-                                      empty_filtered=bool(cfg.dataset.empty_filtered), antennas=antennas)
-        grid = grid_for(capture, grid_override)
-        rec = methods.reconstruct(capture, method=cfg.method.name, freq=targets_ghz, prior=cfg.prior.name,
-                                  scalar_prior_m=float(cfg.prior.scalar_m), device=cfg.device, grid=grid,
-                                  threshold_db=float(cfg.threshold_db), **params)
-        stem = f"{capture.object_name}_{capture.distance_cm}_{capture.radar.index:06d}"
-        write_depth(out_dir, stem, rec.depth_m, rec.grid)
-        if capture.mesh is not None:
-            scores = evaluate(rec.depth_m, ground_truth(capture, rec.grid), faithful=bool(cfg.metrics.faithful))
+        key = hit = None
+        if store is not None:
+            files = capture_files(capture_dir, frame, parts, empty_filtered) + [Path(f) for f in _antenna_files(cfg)
+                                                                                if f is not None]
+            key = store.key({**cell, "capture": store.capture_digest(files)})
+            hit = store.get(key)
+        if hit is None:
+            capture = _read_capture(capture_dir, frame, parts, empty_filtered, _antenna_files(cfg))
+            grid = grid_for(capture, grid_override)
+            row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index,
+                   "method": cfg.method.name, "freq": cfg.freq.name, "prior": cfg.prior.name, "grid": cfg.grid.name}
+            scores, arrays = _compute(cfg, capture, grid, device)
+            row.update(scores, hostname=socket.gethostname(), code_version=cell["code"], key=key)
+            if store is not None:
+                store.put(key, row, arrays, _grid_attrs(grid))
         else:
-            scores = dict.fromkeys(METRIC_COLUMNS, float("nan"))
-            log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
-        row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index,
-               "method": cfg.method.name, "freq": cfg.freq.name, "prior": cfg.prior.name,
-               "f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
-               "runtime_ms": rec.timings_ms["total"], "device": rec.extra.get("device", cfg.device), **scores}
-        row.update({f"t_{stage}_ms": ms for stage, ms in rec.timings_ms.items() if stage != "total"})
-        rows.append(row)
-        log.info("%s: %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", capture.name, row["valid_px"],
-                 row["runtime_ms"], scores["P_cm"], scores["C_s_cm"])
+            row, arrays, attrs = hit
+            grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]), tuple(map(int, attrs["grid_size"])))
+        stem = f"{row['object']}_{row['distance']}_{row['frame']:06d}"
+        write_depth(out_dir, stem, arrays["depth_m"], grid)
+        write_arrays(out_dir / "arrays.h5", stem, arrays, {**_grid_attrs(grid), "key": key or ""})
+        rows.append({**row, "cached": hit is not None})
+        log.info("%s/%s: %s, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],
+                 "cached" if hit else "computed", row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
         write_results(out_dir / "results.csv", rows)   # after every capture: an interruption loses no row
     return rows
+
+
+def _isolate_warp_cache() -> None:
+    """Parallel jobs must not compile Warp kernels into one cache directory (DESIGN.md 8): one per process."""
+    if HydraConfig.get().mode == RunMode.MULTIRUN and "WARP_CACHE_PATH" not in os.environ:
+        os.environ["WARP_CACHE_PATH"] = str(Path(tempfile.gettempdir()) / f"bench-warp-{os.getuid()}-{os.getpid()}")
 
 
 @hydra.main(version_base="1.3", config_path=str(CONFIG_DIR), config_name="config")
 def main(cfg: DictConfig) -> None:
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    _isolate_warp_cache()
     try:
         run(cfg, out_dir)
     except DatasetError as err:

@@ -1,61 +1,73 @@
-"""`python -m bench.demo [--root DIR] [--out DIR]`: the main job on the embedded synthetic dataset.
+"""`python -m bench.demo [--root DIR] [--out DIR] [--store DIR] [--results DIR]`: the README's main job.
 
-Generates (or reuses) the synthetic catalogue, prints what the reader finds in every capture, then runs each
-method on every capture through the same code path as `python -m bench` and prints the mean metrics and
-runtimes per run. Each run's results.csv and depth images land in `--out/<run>/`.
+Runs the paper's experiments `table2` and `table3` on the embedded synthetic dataset (generated on first use) as
+Hydra multiruns with the local parallel launcher, exactly as `python -m bench -m experiment=NAME
+hydra/launcher=local` would; finished cells come from the result store, so a re-run computes only missing cells.
+Prints Tables I-III, and copies each sweep root's tables and plots (plus its per-capture rows, the regression
+baseline) into `--results/<table>/` and Table I into `--results/table1.*`.
 """
 from __future__ import annotations
 
 import argparse
+import shutil
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pandas as pd
-from hydra import compose, initialize_config_dir
 
-from bench import inspect as inspect_cli
-from bench import maroon
-from bench.app import CONFIG_DIR, run
+from bench import tables
 from bench.cli import run_guarded
 
-RUNS = {  # run name -> Hydra overrides (the paper's comparisons at a size that suits a 2-core CPU)
-    "mm2fsk_d10_realsense": ["method=mm2fsk", "freq=d10", "prior=realsense"],
-    "mm2fsk_d10_photogrammetry": ["method=mm2fsk", "freq=d10", "prior=photogrammetry"],
-    "mm2fsk_d05_realsense": ["method=mm2fsk", "freq=d05", "prior=realsense"],
-    "2fsk_d05": ["method=2fsk", "freq=d05", "prior=none"],
-    "2fsk_d1": ["method=2fsk", "freq=d1", "prior=none"],
-    "3fsk_d05_d10": ["method=3fsk", "freq=d05_d10", "prior=none"],
-    "bp_d05_coarse": ["method=bp", "freq=d05", "prior=none", "grid=coarse"],
-}
-SUMMARY_COLUMNS = ["C_g_cm", "C_s_cm", "P_cm", "P_e_cm", "valid_px", "runtime_ms"]
+EXPERIMENTS = ("table2", "table3")
+REPORT_FILES = ("{table}.md", "{table}.csv", "{table}.tex", "runtime_vs_error.png")
+
+
+def sweep(experiment: str, root: Path, out: Path, store: Path) -> pd.DataFrame:
+    """One multirun into `out/<experiment>`; returns its merged rows."""
+    command = [sys.executable, "-m", "bench", "-m", f"experiment={experiment}", "hydra/launcher=local",
+               f"dataset.root={root}", f"store.dir={store}", f"hydra.sweep.dir={out / experiment}"]
+    print(f"\n$ {' '.join(command[1:])}", flush=True)
+    shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+    return pd.read_csv(out / experiment / "results.csv")
+
+
+def publish(sweep_root: Path, rows: pd.DataFrame, table: str, results: Path) -> None:
+    """Copy the sweep's table files, plots and rows (without the volatile `cached` flag) to `results/<table>/`."""
+    target = results / table
+    shutil.rmtree(target, ignore_errors=True)
+    target.mkdir(parents=True)
+    for name in REPORT_FILES:
+        shutil.copy2(sweep_root / name.format(table=table), target)
+    shutil.copytree(sweep_root / "depth_errors", target / "depth_errors")
+    rows.drop(columns="cached").to_csv(target / "results.csv", index=False)
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(prog="python -m bench.demo", description=__doc__)
     parser.add_argument("--root", type=Path, default=Path("data/synthetic"), help="synthetic dataset root")
-    parser.add_argument("--out", type=Path, default=Path("outputs/demo"), help="where each run writes its files")
-    parser.add_argument("--runs", nargs="*", choices=sorted(RUNS), default=list(RUNS), help="subset of runs")
+    parser.add_argument("--out", type=Path, default=Path("outputs/demo"), help="sweep roots go here")
+    parser.add_argument("--store", type=Path, default=Path("outputs/store"), help="result store (cache)")
+    parser.add_argument("--results", type=Path, default=tables.RESULTS_DIR, help="committed outputs")
     args = parser.parse_args()
-    root, out = args.root.resolve(), args.out.resolve()
-    summaries = []
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        for i, name in enumerate(args.runs):
-            cfg = compose(config_name="config", overrides=[f"dataset.root={root}", *RUNS[name]])
-            rows = run(cfg, out / name)
-            if i == 0:   # the dataset exists now: show what the reader finds, as `python -m bench.inspect` does
-                print(f"\n== captures in {root}")
-                for capture_dir in maroon.discover_captures(root):
-                    found, problems = inspect_cli.inspect_capture(capture_dir)
-                    print(f"{capture_dir.parent.name}/{capture_dir.name}  {'PROBLEMS' if problems else 'ok'}")
-                    for line in found + [f"!! {p}" for p in problems]:
-                        print(f"  {line}")
-                print()
-            table = pd.DataFrame(rows)
-            summaries.append({"run": name, "captures": len(table), **table[SUMMARY_COLUMNS].mean().to_dict()})
-            print(f"{name}: {len(table)} captures, mean P {summaries[-1]['P_cm']:.2f} cm, "
-                  f"mean runtime {summaries[-1]['runtime_ms']:.0f} ms", flush=True)
-    summary = pd.DataFrame(summaries)
-    print(f"\n== mean over captures (centimetres; runtime_ms per frame on the CPU); files under {out}")
-    print(summary.to_string(index=False, float_format=lambda v: f"{v:.2f}"))
+    root, out, store = args.root.resolve(), args.out.resolve(), args.store.resolve()
+    started = time.perf_counter()
+    table1 = tables.table1()
+    args.results.mkdir(parents=True, exist_ok=True)
+    table1.to_csv(args.results / "table1.csv", index=False, float_format="%.4f")
+    (args.results / "table1.md").write_text(tables.to_markdown(table1) + "\n")
+    texts = [f"Table I: frequency configurations\n\n{tables.to_markdown(table1)}"]
+    for experiment in EXPERIMENTS:
+        rows = sweep(experiment, root, out, store)
+        publish(out / experiment, rows, experiment, args.results)
+        texts.append((out / experiment / f"{experiment}.md").read_text())
+        print(f"{experiment}: {len(rows)} rows, {int((~rows.cached).sum())} computed, {int(rows.cached.sum())} "
+              f"from the store", flush=True)
+    print("\n\n".join(["", *texts]))
+    print(f"sweep roots under {out}; tables and plots copied to {args.results}; "
+          f"{time.perf_counter() - started:.0f} s in all")
     return 0
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -26,11 +25,12 @@ def _bench(*overrides: str) -> subprocess.CompletedProcess:
 def test_run_writes_results_and_depth_images(synth_root, tmp_path):
     out = tmp_path / "run"
     result = _bench("dataset=maroon", f"dataset.root={synth_root}", "method=mm2fsk", "freq=d10",
-                    "prior=realsense", f"hydra.run.dir={out}")
+                    "prior=realsense", "store.dir=null", f"hydra.run.dir={out}")
     assert result.returncode == 0, result.stderr
     table = pd.read_csv(out / "results.csv")
     assert list(table.columns[:len(RESULT_COLUMNS)]) == RESULT_COLUMNS
-    assert {"t_prior_ms", "t_correlate_ms"} <= set(table.columns)
+    assert {"t_prior_ms", "t_correlate_ms", "grid", "hostname", "code_version"} <= set(table.columns)
+    assert not table.cached.any()
     assert sorted(table.object) == ["01_plate", "03_sphere"]
     plate = table.set_index("object").loc["01_plate"]
     assert plate.f_GHz == "72.0000 82.0000" and plate.device == "cpu" and plate.valid_px > 1000
@@ -62,3 +62,67 @@ def test_every_config_composes(group):
         for option in CONFIG_GROUPS[group]:
             cfg = compose(config_name="config", overrides=[f"{group}={option}"])
             assert cfg[group].name == option
+
+
+def _experiment_cells(name: str) -> list[tuple[str, str, str, str]]:
+    """(method, freq, prior, grid) of every job the experiment's sweep launches."""
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        params = compose(config_name="config", overrides=[f"experiment={name}"],
+                         return_hydra_config=True).hydra.sweeper.params
+        ((key, values),) = params.items()
+        cells = []
+        for value in values.split(","):
+            cfg = compose(config_name="config", overrides=[f"experiment={name}", f"{key}={value}"])
+            cells.append((cfg.method.name, cfg.freq.name, cfg.prior.name, cfg.grid.name))
+    return cells
+
+
+def test_experiments_sweep_the_papers_cells():
+    two = ["d05", "d1", "d2", "d4", "d8", "d10"]
+    assert _experiment_cells("table2") == [("mm2fsk", f, "photogrammetry", "from_capture") for f in two]
+    table3 = _experiment_cells("table3")
+    assert table3 == ([("bp", f, "none", "bp_cpu") for f in ("full", "d05", "d1", "d10")]
+                      + [("2fsk", f, "none", "from_capture") for f in ("d05", "d1", "d10")]
+                      + [("3fsk", f, "none", "from_capture") for f in ("d05_d10", "d1_d10", "d2_d10")]
+                      + [("mm2fsk", f, "realsense", "from_capture") for f in ("d05", "d1", "d10")])
+    runtime = _experiment_cells("runtime")
+    assert set(table3) < set(runtime) and len(runtime) == len(set(runtime)) == 7 + 6 + 3 + 6
+
+
+def test_cells_and_experiments_compose():
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        for cell in sorted(p.stem for p in (CONFIG_DIR / "cell").glob("*.yaml")):
+            cfg = compose(config_name="config", overrides=[f"cell={cell}"])
+            assert cell == f"{cfg.method.name}_{cfg.freq.name}"
+        paper = compose(config_name="config", overrides=["cell=bp_full", "grid=paper"])   # command line wins
+        assert paper.grid.name == "paper"
+        for launcher in ("local", "slurm"):
+            cfg = compose(config_name="config", overrides=[f"hydra/launcher={launcher}"], return_hydra_config=True)
+            assert cfg.hydra.launcher._target_.endswith(("JoblibLauncher", "SlurmLauncher"))
+
+
+def _sweep(tmp_path, synth_root, launcher: str, freqs: str) -> pd.DataFrame:
+    root = tmp_path / "sweep"
+    result = _bench("-m", "experiment=table2", f"hydra.sweeper.params.freq='{freqs}'", f"hydra/launcher={launcher}",
+                    "dataset=maroon", f"dataset.root={synth_root}", "dataset.captures=[01_plate/30]",
+                    f"store.dir={tmp_path / 'store'}", f"hydra.sweep.dir={root}")
+    assert result.returncode == 0, result.stderr
+    return root
+
+
+def test_joblib_sweep_merges_rows_and_writes_table_and_plots(synth_root, tmp_path):
+    root = _sweep(tmp_path, synth_root, "local", "d8,d10")
+    merged = pd.read_csv(root / "results.csv")
+    assert sorted(merged.freq) == ["d10", "d8"] and not merged.cached.any()
+    assert merged.P_cm.max() < 0.2                                       # MM-2FSK, ground-truth prior, plate
+    assert "MM-2FSK Δ10.0" in (root / "table2.md").read_text()
+    assert (root / "runtime_vs_error.png").stat().st_size > 0
+    assert (root / "depth_errors" / "01_plate_30_000000.png").stat().st_size > 0
+    again = pd.read_csv(_sweep(tmp_path, synth_root, "local", "d8,d10") / "results.csv")
+    assert again.cached.all()                                            # the re-run computes nothing
+
+
+@pytest.mark.slow
+def test_submitit_local_sweep(synth_root, tmp_path):
+    merged = pd.read_csv(_sweep(tmp_path, synth_root, "submitit_local", "d10") / "results.csv")
+    assert list(merged.freq) == ["d10"] and merged.P_cm[0] < 0.2

@@ -1,0 +1,136 @@
+"""Result store: one row + one HDF5 file of arrays per cell, keyed by content, configuration and code version.
+
+A cell is (capture frame, method, frequencies, prior, grid, parameters, device, code version). Its key is the
+sha256 of all of that, where the capture enters through the sha256 of the files the reader actually opens (frame,
+calibration, metadata, alignment, RealSense frame, mesh) and the antenna files; file digests are cached by
+(path, size, mtime) under `<store>/digests/`, so hashing costs one `stat` per file after the first time.
+Writes are atomic (temp file + `os.replace`) and the row is written after its arrays: a row on disk always has
+its arrays, and an interrupted sweep loses no finished cell.
+
+Layout: `<store>/cells/<key>.json` (the results row), `<store>/cells/<key>.h5` (depth_m, magnitude, gt_depth_m on
+the cell's pixel grid, metres / linear), `<store>/digests/<hash of path, size, mtime>` (a file's sha256).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from importlib.metadata import version
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from bench import maroon
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+CODE_DIRS = ("methods", "metrics")                                     # every .py file in these
+CODE_FILES = ("bench/maroon.py", "bench/capture.py", "bench/grids.py", "bench/alignment.py", "bench/antennas.py",
+              "bench/images.py", "bench/safe_pickle.py")               # the reader shapes results too
+ARRAY_NAMES = ("depth_m", "magnitude", "gt_depth_m")
+
+
+def _sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _atomic_write_bytes(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def code_version() -> str:
+    """`<package version>+<sha256 prefix of the methods/, metrics/ and reader sources>`."""
+    files = sorted(p for d in CODE_DIRS for p in (PACKAGE_ROOT / d).rglob("*.py"))
+    files += [PACKAGE_ROOT / f for f in CODE_FILES]
+    digest = hashlib.sha256()
+    for path in files:
+        digest.update(path.relative_to(PACKAGE_ROOT).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return f"{version('mm2fsk-bench')}+{digest.hexdigest()[:12]}"
+
+
+def capture_files(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool) -> list[Path]:
+    """The files `maroon.read_capture` opens for this frame and these parts (those that exist)."""
+    metadata = maroon.read_metadata(capture_dir)
+    files = [capture_dir / "metadata.json", maroon.alignment_path(capture_dir, metadata)]
+    if "radar" in parts:
+        radar_dir = maroon.find_radar_folder(capture_dir)
+        frames = maroon.list_radar_frames(radar_dir)
+        index = frames[frame] if frame < 0 else frame
+        name = f"{index:06d}_emptyfiltered.npy" if empty_filtered else f"{index:06d}.npy"
+        files += [radar_dir / "calibration.json", radar_dir / "calibrated_data" / name]
+    if "realsense" in parts and (capture_dir / "realsense").is_dir():
+        realsense_dir = capture_dir / "realsense"
+        index = maroon.list_depth_frames(realsense_dir)[-1]
+        files += [realsense_dir / "calibration.json", realsense_dir / "depth" / f"{index:06d}.png",
+                  realsense_dir / "mask" / f"{index:06d}.png"]
+    if "mesh" in parts and (capture_dir / "photogrammetry").is_dir():
+        files.append(maroon.find_mesh(capture_dir / "photogrammetry"))
+    return [f for f in files if f.is_file()]
+
+
+class Store:
+    """Cells under `root` (created on first write)."""
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+        self.cells = self.root / "cells"
+
+    def file_digest(self, path: Path) -> str:
+        """sha256 of a file's bytes, cached by (absolute path, size, mtime_ns)."""
+        stat = path.stat()
+        stamp = f"{path.resolve()}\0{stat.st_size}\0{stat.st_mtime_ns}".encode()
+        cached = self.root / "digests" / hashlib.sha256(stamp).hexdigest()[:32]
+        if cached.is_file():
+            return cached.read_text()
+        digest = _sha256_file(path)
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        _atomic_write_bytes(cached, digest.encode())
+        return digest
+
+    def capture_digest(self, files: list[Path]) -> str:
+        """sha256 over the names and contents of `files` (names relative to their common capture folder)."""
+        digest = hashlib.sha256()
+        for path in files:
+            digest.update(f"{path.name}\0{self.file_digest(path)}\0".encode())
+        return digest.hexdigest()
+
+    @staticmethod
+    def key(description: dict) -> str:
+        """sha256 (hex) of a JSON-serialisable description of a cell."""
+        return hashlib.sha256(json.dumps(description, sort_keys=True, default=str).encode()).hexdigest()
+
+    def get(self, key: str) -> tuple[dict, dict[str, np.ndarray], dict] | None:
+        """(row, arrays, array attributes) of a finished cell, or None."""
+        row_path = self.cells / f"{key}.json"
+        if not row_path.is_file():
+            return None
+        with h5py.File(self.cells / f"{key}.h5", "r") as h5:
+            arrays = {name: h5[name][()] for name in ARRAY_NAMES}
+            attrs = dict(h5.attrs)
+        return json.loads(row_path.read_text()), arrays, attrs
+
+    def put(self, key: str, row: dict, arrays: dict[str, np.ndarray], attrs: dict) -> None:
+        """Arrays (with `attrs`, e.g. the pixel grid) first, then the row, each atomically."""
+        self.cells.mkdir(parents=True, exist_ok=True)
+        h5_path = self.cells / f"{key}.h5"
+        tmp = h5_path.with_name(f".{h5_path.name}.{os.getpid()}.tmp")
+        write_arrays(tmp, "/", arrays, attrs)
+        os.replace(tmp, h5_path)
+        _atomic_write_bytes(self.cells / f"{key}.json", json.dumps(row, default=float).encode())
+
+
+def write_arrays(path: Path, group: str, arrays: dict[str, np.ndarray], attrs: dict | None = None) -> None:
+    """Add (or replace) `group` in the HDF5 file `path` with compressed datasets (dtype kept) and attributes."""
+    with h5py.File(path, "a") as h5:
+        if group != "/" and group in h5:
+            del h5[group]
+        node = h5.require_group(group)
+        for name, values in arrays.items():
+            node.create_dataset(name, data=np.asarray(values), compression="gzip", shuffle=True)
+        node.attrs.update(attrs or {})
