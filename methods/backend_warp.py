@@ -6,14 +6,18 @@ Kernels (one thread per point or voxel; points come from an (N, 3) array or from
 * `_tc_kernel` (CUDA default): blocks of 64 points; per frequency the real-split product
   [cos|sin](k e_rx) (64 x 192, fp16) @ [[Sr, Si], [-Si, Sr]] (192 x 192, fp16, fp32 accumulation) on the tensor cores
   (`wp.tile_matmul`), then a row-wise dot with the Tx steering in fp32 (`_prep_kernel` forms the per-point data).
+  Round 4 (`_make_tc2_kernel`, CUDA default via TC_VERSION = 2): 128 points per block, the transposed product per Tx
+  half (M_h^T A^T) and the Tx dot as per-thread partial sums; `_tc_kernel` (v1) stays for Warp-CPU and comparison.
 * `_profile_kernel` + `_range_kernel`: range-compressed back-projection (see methods/range_compression.py): profiles
-  in fp16 over the path window the volume needs only (fits L2), Tx steering in registers in chunks of 32.
+  in fp16 over the path window the volume needs only (fits L2), Tx steering in registers in chunks of 32
+  (`_range_kernel`); round 4 default: `_make_range_kernel(16, False)`, chunks of 16.
 Phases use the same cancellation-free split as the numpy backend: |p - q| = |p| + e(p, q) with e in float32 and the
 common phase 2 k |p| in float64, reduced mod 2 pi.
 """
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -25,6 +29,7 @@ MAX_ANTENNAS = 96
 TX_CHUNK = wp.constant(32)          # Tx steering values a thread keeps in registers at a time
 vec_ant = wp.types.vector(length=MAX_ANTENNAS, dtype=wp.float32)
 vec_chunk = wp.types.vector(length=32, dtype=wp.float32)
+vec4h = wp.types.vector(length=4, dtype=wp.float16)
 wp.set_module_options({"max_unroll": 32})
 
 
@@ -150,6 +155,9 @@ TC_ANT = wp.constant(96)           # antennas per side, padded (zero signal in t
 TC_K = wp.constant(192)            # 2 * TC_ANT: [cos | sin] columns, [Re | Im] output columns
 TC_BLOCK = 256                     # threads per block
 RANGE_TILED = False                # range gather: blocks of 32 x 8 voxels (measured slower: 934 vs 836 ms), else flat
+TC_VERSION = 2                     # 2: `_make_tc2_kernel` (round 4, CUDA default); 1: `_tc_kernel` (round 2)
+TC2_POINTS = 128                   # points per block of tc v2 (64: 0.47 ms MM-2FSK, 128: 0.37 ms)
+RANGE_VARIANT = (16, False)        # (chunk, paired): `_make_range_kernel` (round 4: 478 ms); None: `_range_kernel` (835)
 
 
 @wp.func
@@ -245,6 +253,132 @@ def _tc_kernel(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: 
             total = total + val
     if sum_freqs != 0:
         wp.tile_store(out[0], total, offset=i0)
+
+
+TC2_HALF = wp.constant(48)         # Tx antennas per column half of the v2 kernel (2 x 48 = TC_ANT)
+
+
+@functools.cache
+def _make_tc2_kernel(n_points: int, block_dim: int):
+    """tc v2 (round 4): the transposed product per Tx half, Y_h^T = M_h^T A^T (96 x P, fp32 accumulation), with
+    M_h^T = rows [Re | Im] of the Tx half h (96 x 192 fp16, 37 KB) and A^T = [cos; sin](k e_rx) (192 x P fp16), so
+    that shared memory is A^T + M_h^T + Y_h^T (86 KB at P = 64: two blocks per SM, was 200 KB). The Tx dot runs
+    per thread from the (conflict-free, point-contiguous) Y_h^T columns: thread lane takes point lane % P and every
+    G-th Tx of the half (G = block_dim / P), then `wp.tile` + `tile_sum(axis=0)` combine the G partial sums."""
+    P = wp.constant(n_points)
+    G = wp.constant(block_dim // n_points)
+
+    @wp.kernel(module="unique", module_options={"fast_math": True, "enable_backward": False})
+    def tc2(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: wp.array(dtype=wp.vec4f),
+            k_rad_per_m: wp.array(dtype=wp.float32), gain: wp.array(dtype=wp.float32),
+            mat_h: wp.array4d(dtype=wp.float16), common: wp.array2d(dtype=wp.vec2f), sum_freqs: int, n_half: int,
+            out: wp.array2d(dtype=wp.vec2f)):
+        blk, lane = wp.tid()
+        i0 = blk * P
+        pt = lane % P
+        grp = lane // P
+        p = wp.tile_load(pts, shape=P, offset=i0, storage="shared")
+        qr = wp.tile_load(rx, shape=TC_ANT, storage="shared")
+        qt = wp.tile_load(tx, shape=TC_ANT, storage="shared")
+        e_rx = wp.tile_map(_excess4, wp.tile_broadcast(wp.tile_reshape(p, shape=(1, P)), shape=(TC_ANT, P)),
+                           wp.tile_broadcast(wp.tile_reshape(qr, shape=(TC_ANT, 1)), shape=(TC_ANT, P)))
+        a = wp.tile_empty(shape=(TC_K, P), dtype=wp.float16, storage="shared")
+        y = wp.tile_empty(shape=(TC_ANT, P), dtype=wp.float32, storage="shared")
+        pp = p[pt]
+        total = wp.tile_zeros(shape=P, dtype=wp.vec2f)
+        for f in range(k_rad_per_m.shape[0]):
+            k = k_rad_per_m[f]
+            wp.tile_assign(a, wp.tile_map(_cos_h, e_rx, k), offset=(0, 0))
+            wp.tile_assign(a, wp.tile_map(_sin_h, e_rx, k), offset=(TC_ANT, 0))
+            acc = wp.vec2f(0.0, 0.0)
+            for h in range(n_half):                      # run-time bound: one M_h^T allocation, not unrolled
+                m = wp.tile_load(mat_h[f, h], shape=(TC_ANT, TC_K), storage="shared", aligned=True)
+                wp.tile_matmul(m, a, y, alpha=1.0, beta=0.0)
+                for jj in range(grp, TC2_HALF, G):
+                    d = _tx_dot(y[jj, pt], y[jj + TC2_HALF, pt], _excess4(pp, qt[h * TC2_HALF + jj]), k)
+                    acc = acc + d
+            part = wp.tile_reshape(wp.tile(acc, preserve_type=True), shape=(G, P))
+            val = wp.tile_map(_cmul_gain, wp.tile_sum(part, axis=0),
+                              wp.tile_load(common[f], shape=P, offset=i0), gain[f])
+            if sum_freqs == 0:
+                wp.tile_store(out[f], val, offset=i0)
+            else:
+                total = total + val
+        if sum_freqs != 0:
+            wp.tile_store(out[0], total, offset=i0)
+    return tc2
+
+
+@functools.cache
+def _make_range_kernel(chunk: int, paired: bool):
+    """Range gather (flat, thread i = voxel i) with Tx chunks of `chunk` in registers. `paired`: the table holds
+    (g_m, g_m+1 - g_m) as one 8-byte vec4h per sample, so each pair's interpolation is one load (round 4)."""
+    CH = wp.constant(chunk)
+    vec_c = wp.types.vector(length=chunk, dtype=wp.float32)
+
+    @wp.kernel(module="unique", module_options={"enable_backward": False, "max_unroll": 32})
+    def gather(x: wp.array(dtype=wp.float64), y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
+               rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
+               carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
+               profiles: wp.array2d(dtype=Any), out: wp.array2d(dtype=wp.vec2f)):
+        i = wp.tid()
+        nx = x.shape[0]
+        ny = y.shape[0]
+        p64 = wp.vec3d(x[i % nx], y[(i // nx) % ny], z[i // (nx * ny)])
+        norm64 = wp.length(p64)
+        p = wp.vec3f(p64)
+        norm = wp.float32(norm64)
+        n_tx = tx.shape[0]
+        u_max = wp.float32(profiles.shape[1]) - 1.001
+        acc = wp.vec2f(0.0, 0.0)
+        for chunk_i in range(n_tx // CH):
+            t0 = chunk_i * CH
+            u_tx = vec_c()
+            b_re = vec_c()
+            b_im = vec_c()
+            for j in range(CH):
+                e = _excess_m(p, norm, tx[t0 + j])
+                u_tx[j] = e * samples_per_m
+                b_re[j] = wp.cos(k_carrier * e)
+                b_im[j] = wp.sin(k_carrier * e)
+            for r in range(rx.shape[0]):
+                e_rx = _excess_m(p, norm, rx[r])
+                base = (2.0 * norm + e_rx) * samples_per_m - m0
+                row = r * n_tx + t0
+                gb = wp.vec2f(0.0, 0.0)
+                for j in range(CH):
+                    u = wp.clamp(base + u_tx[j], 0.0, u_max)
+                    iu = wp.int32(u)
+                    w = u - wp.float32(iu)
+                    g = _lerp_sample(profiles, row + j, iu, w)
+                    gb += _cmul(g, wp.vec2f(b_re[j], b_im[j]))
+                phase = k_carrier * e_rx
+                acc += _cmul(wp.vec2f(wp.cos(phase), wp.sin(phase)), gb)
+        out[0, i] = _cmul(acc, _phasor_cycles(norm64 * carrier_cycles_per_m))
+    return gather
+
+
+@wp.func
+def _lerp_sample(profiles: wp.array2d(dtype=wp.vec2h), row: int, iu: int, w: wp.float32) -> wp.vec2f:
+    g0 = wp.vec2f(profiles[row, iu])
+    return g0 + w * (wp.vec2f(profiles[row, iu + 1]) - g0)
+
+
+@wp.func
+def _lerp_sample(profiles: wp.array2d(dtype=vec4h), row: int, iu: int, w: wp.float32) -> wp.vec2f:
+    q = profiles[row, iu]
+    return wp.vec2f(wp.float32(q[0]) + w * wp.float32(q[2]), wp.float32(q[1]) + w * wp.float32(q[3]))
+
+
+@wp.kernel(enable_backward=False)
+def _pair_kernel(profiles: wp.array2d(dtype=wp.vec2h), paired: wp.array2d(dtype=vec4h)):
+    """paired[row, j] = (g_j, g_j+1 - g_j) from the fp16 profiles (last column: difference 0)."""
+    row, j = wp.tid()
+    g0 = wp.vec2f(profiles[row, j])
+    d = wp.vec2f(0.0, 0.0)
+    if j + 1 < profiles.shape[1]:
+        d = wp.vec2f(profiles[row, j + 1]) - g0
+    paired[row, j] = vec4h(wp.float16(g0[0]), wp.float16(g0[1]), wp.float16(d[0]), wp.float16(d[1]))
 
 
 @wp.kernel(enable_backward=False)
@@ -397,6 +531,16 @@ class _Inputs:
                     wp.array(np.ascontiguousarray(mat), dtype=wp.float16, device=dev))
         return self._get("tc", build)
 
+    def tc2_mat(self):
+        """(F, 2, TC_ANT, TC_K) fp16: per Tx half h the rows [M[:, h*48 + j] ; M[:, 96 + h*48 + j]] of M^T."""
+        def build():
+            mat = self.tc_tables()[3].numpy().astype(np.float16)           # (F, 192, 192)
+            n, hh = int(TC_ANT), int(TC2_HALF)
+            halves = [np.concatenate([mat[:, :, h * hh:(h + 1) * hh], mat[:, :, n + h * hh:n + (h + 1) * hh]],
+                                     axis=2).transpose(0, 2, 1) for h in range(2)]
+            return wp.array(np.ascontiguousarray(np.stack(halves, axis=1)), dtype=wp.float16, device=self.device)
+        return self._get("tc2", build)
+
 
 FRAME_CACHE_SIZE = 4
 _frames: dict = {}
@@ -467,10 +611,26 @@ def _range_launch(inputs: _Inputs, freqs_hz, points, x, y, z, out, grid_m):
     nx, ny, nz = x.shape[0], y.shape[0], z.shape[0]
     n_threads = 256 * ((nx + 31) // 32) * ((ny + 7) // 8) * nz if RANGE_TILED else out.shape[1]
 
+    variant = RANGE_VARIANT
+    if variant is not None:
+        chunk, paired = variant
+        if n_tx_pad % chunk:
+            raise ValueError(f"range chunk {chunk} must divide the padded Tx count {n_tx_pad}")
+        table = wp.empty((n_rx * n_tx_pad, n_window), dtype=vec4h, device=dev) if paired else profiles
+        gather_args = [x, y, z, inputs.rx, inputs.tx_padded, wp.float32(k_c),
+                       wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S), wp.float32(rplan.samples_per_m),
+                       wp.float32(m0), table, out]
+        n_threads = out.shape[1]
+
     def run():
         wp.launch(_profile_kernel, dim=(n_rx * n_tx_pad, n_window), inputs=[sig, index, twiddle, shift, int(m0) % rplan.n_samples,
                                                                            profiles], device=dev)
-        wp.launch(_range_kernel, dim=n_threads, inputs=gather_args, block_dim=256, device=dev)
+        if variant is None:
+            wp.launch(_range_kernel, dim=n_threads, inputs=gather_args, block_dim=256, device=dev)
+            return out
+        if variant[1]:
+            wp.launch(_pair_kernel, dim=(n_rx * n_tx_pad, n_window), inputs=[profiles, table], device=dev)
+        wp.launch(_make_range_kernel(*variant), dim=n_threads, inputs=gather_args, block_dim=256, device=dev)
         return out
     return run
 
@@ -514,12 +674,17 @@ def make_launch(signal, freqs_hz, tx_m, rx_m, *, device: str, kernel: str, point
             pts = wp.empty(n_out, dtype=wp.vec4f, device=dev)
             common = wp.empty((inputs.n_freqs, n_out), dtype=wp.vec2f, device=dev)
         prep_args = [flag, points, x, y, z, inputs.cycles, pts, common]
-        tc_args = [pts, rx4, tx4, inputs.k, gain, mat, common, int(sum_freqs), out]
-        n_blocks = (n_out + int(TC_POINTS) - 1) // int(TC_POINTS)
+        if TC_VERSION == 2 and dev != "cpu":           # (v2 needs real blocks: Warp-CPU runs block_dim 1)
+            tc_kernel, n_tile = _make_tc2_kernel(TC2_POINTS, TC_BLOCK), TC2_POINTS
+            tc_args = [pts, rx4, tx4, inputs.k, gain, inputs.tc2_mat(), common, int(sum_freqs), 2, out]
+        else:
+            tc_kernel, n_tile = _tc_kernel, int(TC_POINTS)
+            tc_args = [pts, rx4, tx4, inputs.k, gain, mat, common, int(sum_freqs), out]
+        n_blocks = (n_out + n_tile - 1) // n_tile
 
         def run_tc():
             wp.launch(_prep_kernel, dim=n_out, inputs=prep_args, device=dev)
-            wp.launch_tiled(_tc_kernel, dim=[n_blocks], inputs=tc_args, block_dim=TC_BLOCK, device=dev)
+            wp.launch_tiled(tc_kernel, dim=[n_blocks], inputs=tc_args, block_dim=TC_BLOCK, device=dev)
             return out
         return run_tc
     if kernel == "direct":
