@@ -72,7 +72,9 @@ def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path) -> list[Path]:
         crop_cm = _compared_extent_cm([h5_path for _, h5_path in runs], stem)
         ncols = min(len(runs), 7)
         nrows = -(-len(runs) // ncols)
-        fig, axes = plt.subplots(nrows, ncols, figsize=(2.2 * ncols, 2.4 * nrows + 0.4), squeeze=False)
+        aspect = (crop_cm[1][1] - crop_cm[1][0]) / (crop_cm[0][1] - crop_cm[0][0])
+        fig, axes = plt.subplots(nrows, ncols, figsize=(2.2 * ncols + 1.0, (2.2 * aspect + 0.4) * nrows + 0.5),
+                                 squeeze=False, layout="constrained")
         for ax in axes.flat:
             ax.set_axis_off()
         for ax, (label, h5_path) in zip(axes.flat, runs):
