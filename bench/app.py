@@ -46,10 +46,19 @@ def _capture_dirs(dataset: DictConfig, root: Path) -> list[Path]:
 
 
 def _ensure_synthetic(dataset: DictConfig, root: Path) -> None:
-    """Generate (or reuse from cache) the synthetic captures the dataset config asks for."""
+    """Generate (or reuse from cache) the synthetic captures the dataset config asks for.
+
+    Only into an empty or missing folder or one the generator made (it holds its manifest): a folder with other
+    data, e.g. the real dataset given as `dataset.root`, is never written.
+    """
     if dataset.generate is None:
         return
     from bench.synth import SynthConfig, generate_catalogue
+    from bench.synth.generate import MANIFEST_NAME
+
+    if root.is_dir() and any(root.iterdir()) and not (root / MANIFEST_NAME).is_file():
+        log.info("%s holds data the generator did not write: reading it as it is, generating nothing", root)
+        return
 
     objects = None if dataset.generate.objects is None else list(dataset.generate.objects)
     generate_catalogue(root, distances=list(dataset.generate.distances), objects=objects, config=SynthConfig(),

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -126,3 +127,14 @@ def test_joblib_sweep_merges_rows_and_writes_table_and_plots(synth_root, tmp_pat
 def test_submitit_local_sweep(synth_root, tmp_path):
     merged = pd.read_csv(_sweep(tmp_path, synth_root, "submitit_local", "d10") / "results.csv")
     assert list(merged.freq) == ["d10"] and merged.P_cm[0] < 0.2
+
+
+def test_a_foreign_dataset_root_is_never_written(synth_root, tmp_path):
+    """`dataset.root=DIR` with the default (synthetic) dataset config must not generate into a real dataset."""
+    root = tmp_path / "maroon"
+    shutil.copytree(synth_root / "01_plate", root / "01_plate")      # captures, but no generator manifest
+    before = sorted(p.relative_to(root) for p in root.rglob("*"))
+    result = _bench(f"dataset.root={root}", "method=2fsk", "freq=d05", "prior=none", "store.dir=null",
+                    f"hydra.run.dir={tmp_path / 'run'}")
+    assert result.returncode == 0, result.stderr
+    assert sorted(p.relative_to(root) for p in root.rglob("*")) == before
