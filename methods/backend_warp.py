@@ -256,17 +256,41 @@ def _tc_kernel(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: 
 
 
 TC2_HALF = wp.constant(48)         # Tx antennas per column half of the v2 kernel (2 x 48 = TC_ANT)
+# Round 7 layout options of tc v2 (see notes/gpu.md): parts = Tx splits per frequency (2: halves of 48, 4: quarters
+# of 24); kpad / npad = zero columns appended to the product's K (M^T and A^T rows) / N (A^T and Y^T columns), so
+# that the dense shared-memory rows are not a multiple of 128 bytes; a_kmajor = A stored (N, K) and passed
+# through `tile_transpose` (K contiguous); erx = "reg" (e_rx tile kept for all frequencies) or "recompute".
+TC2_VARIANT = dict(parts=2, kpad=8, npad=8, a_kmajor=False, erx="reg")   # round 7: kpad = npad = 8 (-44 %)
+TC2_ON_CPU = False                 # checks only: v2 on Warp-CPU (needs TC2_POINTS = TC_BLOCK = 1 there)
+
+
+@wp.func
+def _cos_pq(p: wp.vec4f, q: wp.vec4f, k: wp.float32) -> wp.float16:
+    return _cos_h(_excess4(p, q), k)
+
+
+@wp.func
+def _sin_pq(p: wp.vec4f, q: wp.vec4f, k: wp.float32) -> wp.float16:
+    return _sin_h(_excess4(p, q), k)
 
 
 @functools.cache
-def _make_tc2_kernel(n_points: int, block_dim: int):
-    """tc v2 (round 4): the transposed product per Tx half, Y_h^T = M_h^T A^T (96 x P, fp32 accumulation), with
-    M_h^T = rows [Re | Im] of the Tx half h (96 x 192 fp16, 37 KB) and A^T = [cos; sin](k e_rx) (192 x P fp16), so
-    that shared memory is A^T + M_h^T + Y_h^T (86 KB at P = 64: two blocks per SM, was 200 KB). The Tx dot runs
-    per thread from the (conflict-free, point-contiguous) Y_h^T columns: thread lane takes point lane % P and every
-    G-th Tx of the half (G = block_dim / P), then `wp.tile` + `tile_sum(axis=0)` combine the G partial sums."""
+def _make_tc2_kernel(n_points: int, block_dim: int, parts: int = 2, kpad: int = 0, npad: int = 0,
+                     a_kmajor: bool = False, erx: str = "reg"):
+    """tc v2 (round 4): the transposed product per Tx part, Y_h^T = M_h^T A^T (2Q x P, fp32 accumulation), with
+    M_h^T = rows [Re | Im] of the Tx part h (Q = TC_ANT / parts Tx; 2Q x 192 fp16) and A^T = [cos; sin](k e_rx)
+    (192 x P fp16), so that shared memory is A^T + M_h^T + Y_h^T. The Tx dot runs per thread from the
+    (point-contiguous) Y_h^T columns: thread lane takes point lane % P and every G-th Tx of the part
+    (G = block_dim / P), then `wp.tile` + `tile_sum(axis=0)` combine the G partial sums. Round 7 options (kpad, npad,
+    a_kmajor, erx): see TC2_VARIANT; the defaults give the round-4 kernel."""
     P = wp.constant(n_points)
     G = wp.constant(block_dim // n_points)
+    Q = wp.constant(int(TC_ANT) // parts)
+    R = wp.constant(2 * (int(TC_ANT) // parts))
+    KP = wp.constant(int(TC_K) + kpad)
+    NP = wp.constant(n_points + npad)
+    KPAD = wp.constant(max(kpad, 1))
+    recompute = erx == "recompute"
 
     @wp.kernel(module="unique", module_options={"fast_math": True, "enable_backward": False})
     def tc2(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: wp.array(dtype=wp.vec4f),
@@ -280,22 +304,46 @@ def _make_tc2_kernel(n_points: int, block_dim: int):
         p = wp.tile_load(pts, shape=P, offset=i0, storage="shared")
         qr = wp.tile_load(rx, shape=TC_ANT, storage="shared")
         qt = wp.tile_load(tx, shape=TC_ANT, storage="shared")
-        e_rx = wp.tile_map(_excess4, wp.tile_broadcast(wp.tile_reshape(p, shape=(1, P)), shape=(TC_ANT, P)),
-                           wp.tile_broadcast(wp.tile_reshape(qr, shape=(TC_ANT, 1)), shape=(TC_ANT, P)))
-        a = wp.tile_empty(shape=(TC_K, P), dtype=wp.float16, storage="shared")
-        y = wp.tile_empty(shape=(TC_ANT, P), dtype=wp.float32, storage="shared")
+        if wp.static(a_kmajor):
+            pb = wp.tile_broadcast(wp.tile_reshape(p, shape=(P, 1)), shape=(P, TC_ANT))
+            qb = wp.tile_broadcast(wp.tile_reshape(qr, shape=(1, TC_ANT)), shape=(P, TC_ANT))
+            a = wp.tile_empty(shape=(NP, KP), dtype=wp.float16, storage="shared")
+            if wp.static(kpad > 0):
+                wp.tile_assign(a, wp.tile_zeros(shape=(NP, KPAD), dtype=wp.float16), offset=(0, TC_K))
+        else:
+            pb = wp.tile_broadcast(wp.tile_reshape(p, shape=(1, P)), shape=(TC_ANT, P))
+            qb = wp.tile_broadcast(wp.tile_reshape(qr, shape=(TC_ANT, 1)), shape=(TC_ANT, P))
+            a = wp.tile_empty(shape=(KP, NP), dtype=wp.float16, storage="shared")
+            if wp.static(kpad > 0):
+                wp.tile_assign(a, wp.tile_zeros(shape=(KPAD, NP), dtype=wp.float16), offset=(TC_K, 0))
+        if wp.static(not recompute):
+            e_rx = wp.tile_map(_excess4, pb, qb)
+        y = wp.tile_empty(shape=(R, NP), dtype=wp.float32, storage="shared")
         pp = p[pt]
         total = wp.tile_zeros(shape=P, dtype=wp.vec2f)
         for f in range(k_rad_per_m.shape[0]):
             k = k_rad_per_m[f]
-            wp.tile_assign(a, wp.tile_map(_cos_h, e_rx, k), offset=(0, 0))
-            wp.tile_assign(a, wp.tile_map(_sin_h, e_rx, k), offset=(TC_ANT, 0))
+            if wp.static(recompute):
+                tc = wp.tile_map(_cos_pq, pb, qb, k)
+                ts = wp.tile_map(_sin_pq, pb, qb, k)
+            else:
+                tc = wp.tile_map(_cos_h, e_rx, k)
+                ts = wp.tile_map(_sin_h, e_rx, k)
+            if wp.static(a_kmajor):
+                wp.tile_assign(a, tc, offset=(0, 0))
+                wp.tile_assign(a, ts, offset=(0, TC_ANT))
+            else:
+                wp.tile_assign(a, tc, offset=(0, 0))
+                wp.tile_assign(a, ts, offset=(TC_ANT, 0))
             acc = wp.vec2f(0.0, 0.0)
             for h in range(n_half):                      # run-time bound: one M_h^T allocation, not unrolled
-                m = wp.tile_load(mat_h[f, h], shape=(TC_ANT, TC_K), storage="shared", aligned=True)
-                wp.tile_matmul(m, a, y, alpha=1.0, beta=0.0)
-                for jj in range(grp, TC2_HALF, G):
-                    d = _tx_dot(y[jj, pt], y[jj + TC2_HALF, pt], _excess4(pp, qt[h * TC2_HALF + jj]), k)
+                m = wp.tile_load(mat_h[f, h], shape=(R, KP), storage="shared", aligned=True)
+                if wp.static(a_kmajor):
+                    wp.tile_matmul(m, wp.tile_transpose(a), y, alpha=1.0, beta=0.0)
+                else:
+                    wp.tile_matmul(m, a, y, alpha=1.0, beta=0.0)
+                for jj in range(grp, Q, G):
+                    d = _tx_dot(y[jj, pt], y[jj + Q, pt], _excess4(pp, qt[h * Q + jj]), k)
                     acc = acc + d
             part = wp.tile_reshape(wp.tile(acc, preserve_type=True), shape=(G, P))
             val = wp.tile_map(_cmul_gain, wp.tile_sum(part, axis=0),
@@ -531,15 +579,19 @@ class _Inputs:
                     wp.array(np.ascontiguousarray(mat), dtype=wp.float16, device=dev))
         return self._get("tc", build)
 
-    def tc2_mat(self):
-        """(F, 2, TC_ANT, TC_K) fp16: per Tx half h the rows [M[:, h*48 + j] ; M[:, 96 + h*48 + j]] of M^T."""
+    def tc2_mat(self, parts: int = 2, kpad: int = 0):
+        """(F, parts, 2Q, TC_K + kpad) fp16, Q = TC_ANT / parts: per Tx part h the rows [M[:, h*Q + j] ; M[:, 96 +
+        h*Q + j]] of M^T, with kpad zero columns appended (round 7 layout option)."""
         def build():
             mat = self.tc_tables()[3].numpy().astype(np.float16)           # (F, 192, 192)
-            n, hh = int(TC_ANT), int(TC2_HALF)
+            n, hh = int(TC_ANT), int(TC_ANT) // parts
             halves = [np.concatenate([mat[:, :, h * hh:(h + 1) * hh], mat[:, :, n + h * hh:n + (h + 1) * hh]],
-                                     axis=2).transpose(0, 2, 1) for h in range(2)]
-            return wp.array(np.ascontiguousarray(np.stack(halves, axis=1)), dtype=wp.float16, device=self.device)
-        return self._get("tc2", build)
+                                     axis=2).transpose(0, 2, 1) for h in range(parts)]
+            m = np.stack(halves, axis=1)
+            if kpad:
+                m = np.concatenate([m, np.zeros(m.shape[:3] + (kpad,), dtype=np.float16)], axis=3)
+            return wp.array(np.ascontiguousarray(m), dtype=wp.float16, device=self.device)
+        return self._get(("tc2", parts, kpad), build)
 
 
 FRAME_CACHE_SIZE = 4
@@ -674,9 +726,11 @@ def make_launch(signal, freqs_hz, tx_m, rx_m, *, device: str, kernel: str, point
             pts = wp.empty(n_out, dtype=wp.vec4f, device=dev)
             common = wp.empty((inputs.n_freqs, n_out), dtype=wp.vec2f, device=dev)
         prep_args = [flag, points, x, y, z, inputs.cycles, pts, common]
-        if TC_VERSION == 2 and dev != "cpu":           # (v2 needs real blocks: Warp-CPU runs block_dim 1)
-            tc_kernel, n_tile = _make_tc2_kernel(TC2_POINTS, TC_BLOCK), TC2_POINTS
-            tc_args = [pts, rx4, tx4, inputs.k, gain, inputs.tc2_mat(), common, int(sum_freqs), 2, out]
+        if TC_VERSION == 2 and (dev != "cpu" or TC2_ON_CPU):           # (v2 needs real blocks: Warp-CPU runs block_dim 1)
+            v = TC2_VARIANT
+            tc_kernel, n_tile = _make_tc2_kernel(TC2_POINTS, TC_BLOCK, **v), TC2_POINTS
+            tc_args = [pts, rx4, tx4, inputs.k, gain, inputs.tc2_mat(v["parts"], v["kpad"]), common,
+                       int(sum_freqs), v["parts"], out]
         else:
             tc_kernel, n_tile = _tc_kernel, int(TC_POINTS)
             tc_args = [pts, rx4, tx4, inputs.k, gain, mat, common, int(sum_freqs), out]
