@@ -13,21 +13,13 @@ import pytest
 from bench.antennas import load_antenna_array
 from methods.correlate import C_M_PER_S, correlate, correlate_reference, correlate_volume, resolve_device
 from methods.range_compression import RANGE_REL_TOL
+from devices import CUDA
 
 ALL_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 ANT = load_antenna_array()
 
 
-def _cuda_ok() -> bool:
-    try:
-        return resolve_device("auto") == "cuda"
-    except ImportError:
-        return False
-
-
-cuda = pytest.mark.cuda
-needs_cuda = pytest.mark.skipif(not _cuda_ok(), reason="no CUDA device seen by Warp")
-DEVICES = ["cpu", "warp-cpu", pytest.param("cuda", marks=[cuda, needs_cuda])]
+DEVICES = ["cpu", "warp-cpu", CUDA]
 
 
 TOL = {"cpu": 1e-4, "warp-cpu": 1e-4, "cuda": 1e-3}     # cuda: the tensor-core kernel, fp16 operands
@@ -64,7 +56,7 @@ def test_correlate_matches_float64_reference(device):
     assert rel_err(out[:, :200], ref) < TOL[device]
 
 
-@pytest.mark.parametrize("device", ["warp-cpu", pytest.param("cuda", marks=[cuda, needs_cuda])])
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 @pytest.mark.parametrize("kernel", ["tc", "separable"])
 def test_warp_kernels_match_reference(device, kernel):
     """Each Warp kernel by name on both Warp devices (the tensor-core kernel runs its scalar tile path on the CPU)."""
@@ -76,7 +68,7 @@ def test_warp_kernels_match_reference(device, kernel):
     assert rel_err(out, ref) < (1e-3 if kernel == "tc" else 1e-4)
 
 
-@pytest.mark.parametrize("device", ["warp-cpu", pytest.param("cuda", marks=[cuda, needs_cuda])])
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 def test_frame_cache_sees_in_place_changes_and_outputs_are_not_shared(device):
     rng = np.random.default_rng()
     signal, freqs_hz, points_m = random_problem(rng, 20, 2)
@@ -89,7 +81,7 @@ def test_frame_cache_sees_in_place_changes_and_outputs_are_not_shared(device):
     assert rel_err(second, ref) < TOL[device]
 
 
-@pytest.mark.parametrize("device", ["warp-cpu", pytest.param("cuda", marks=[cuda, needs_cuda])])
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 def test_plain_direct_kernel_matches_reference(device):
     from methods.backend_warp import correlate_warp
     rng = np.random.default_rng()
@@ -123,7 +115,7 @@ def test_volume_equals_correlate_on_flattened_grid(device):
     assert rel_err(vol.ravel(), flat) < TOL[device]
 
 
-@pytest.mark.parametrize("device", ["warp-cpu", pytest.param("cuda", marks=[cuda, needs_cuda])])
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 def test_range_compressed_volume_within_stated_bound(device):
     rng = np.random.default_rng()
     n_freqs = int(rng.integers(16, 48))

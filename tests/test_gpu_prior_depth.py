@@ -18,22 +18,14 @@ import pytest
 from bench.capture import Mesh, RadarGrid
 from methods import reconstruct
 from methods.bp import peak_depth_m
-from methods.correlate import correlate_volume, resolve_device
+from methods.correlate import correlate_volume
 from methods.prior import mesh_prior_m, realsense_prior_m
+from devices import CUDA
 from methods_scenes import (CAMERA, TABLE1_FREQS_HZ, make_capture, plane_depth_frame, plate_points_m,
                             realsense2radar, simulate, square_grid)
 
 
-def _cuda_ok() -> bool:
-    try:
-        return resolve_device("auto") == "cuda"
-    except ImportError:
-        return False
-
-
-cuda = pytest.mark.cuda
-needs_cuda = pytest.mark.skipif(not _cuda_ok(), reason="no CUDA device seen by Warp")
-DEVICES = ["warp-cpu", pytest.param("cuda", marks=[cuda, needs_cuda])]
+DEVICES = ["warp-cpu", CUDA]
 MAX_SILHOUETTE_PX = 3
 PLANE = (0.31, 0.2, -0.15)
 

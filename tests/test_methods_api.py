@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from methods import reconstruct
-from methods.correlate import resolve_device
+from devices import CUDA
 from methods_scenes import (TABLE1_FREQS_HZ, make_capture, plane_depth_frame, plate_points_m, realsense2radar,
                             simulate, square_grid)
 
@@ -81,15 +81,7 @@ def test_missing_parts_of_the_capture_are_named(tilted_plate):
         reconstruct(dataclasses.replace(tilted_plate, radar=None), "2fsk", "d05")
 
 
-def _cuda_seen() -> bool:
-    try:
-        return resolve_device("auto") == "cuda"
-    except ImportError:
-        return False
-
-
-@pytest.mark.parametrize("device", ["warp-cpu", pytest.param("cuda", marks=[
-    pytest.mark.cuda, pytest.mark.skipif(not _cuda_seen(), reason="no CUDA device seen by Warp")])])
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 @pytest.mark.parametrize("method, config, prior", [("mm2fsk", "d10", "realsense"), ("3fsk", "d05_d10", "none"),
                                                    ("bp", "d05", "none")])
 def test_warp_devices_give_the_cpu_result(tilted_plate, device, method, config, prior):
