@@ -291,16 +291,9 @@ def load(device: str = "cuda") -> None:
     wp.load_module(module=__name__, device=backend_warp._wp_device(device))
 
 
-_buffers: dict = {}
-
-
 def _buffer(name, shape, dtype, dev):
-    key = (name, shape, dtype, dev)
-    if key not in _buffers:
-        for old in [k for k in _buffers if k[0] == name and k[3] == dev]:
-            del _buffers[old]
-        _buffers[key] = wp.empty(shape, dtype=dtype, device=dev)
-    return _buffers[key]
+    """The backend's reusable device buffers, under names of this module's own."""
+    return backend_warp._buffer(f"prior.{name}", shape, dtype, dev)
 
 
 _grids: dict = {}
