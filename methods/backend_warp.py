@@ -3,21 +3,21 @@
 Kernels (one thread per point or voxel; points come from an (N, 3) array or from an x/y/z grid):
 * `_direct_kernel`: the plain direct sum, one sincos per antenna pair and frequency (the comparison baseline).
 * `_separable_kernel`: T + R sincos per point and frequency, then `a^T S b` as complex multiply-adds.
-* `_tc_kernel` (CUDA default): blocks of 64 points; per frequency the real-split product
-  [cos|sin](k e_rx) (64 x 192, fp16) @ [[Sr, Si], [-Si, Sr]] (192 x 192, fp16, fp32 accumulation) on the tensor cores
-  (`wp.tile_matmul`), then a row-wise dot with the Tx steering in fp32 (`_prep_kernel` forms the per-point data).
-  Round 4 (`_make_tc2_kernel`, CUDA default via TC_VERSION = 2): 128 points per block, the transposed product per Tx
-  half (M_h^T A^T) and the Tx dot as per-thread partial sums; `_tc_kernel` (v1) stays for Warp-CPU and comparison.
+* `_tc2_kernel` (kernel "tc" on CUDA): blocks of 128 points; per frequency and Tx half h the real-split product
+  M_h^T A^T on the tensor cores (`wp.tile_matmul`, fp16 operands, fp32 accumulation), A^T = [cos; sin](k e_rx),
+  M = [[Sr, Si], [-Si, Sr]], operand rows padded off multiples of 128 bytes; then the Tx dot as per-thread
+  partial sums in fp32 (`_prep_kernel` forms the per-point data).
+* `_tc_kernel` (kernel "tc" on Warp-CPU, which runs tiles with block_dim 1): blocks of 64 points, the product
+  [cos|sin](k e_rx) (64 x 192) @ M (192 x 192), then a row-wise dot with the Tx steering.
 * `_profile_kernel` + `_range_kernel`: range-compressed back-projection (see methods/range_compression.py): profiles
-  in fp16 over the path window the volume needs only (fits L2), Tx steering in registers in chunks of 32
-  (`_range_kernel`); round 4 default: `_make_range_kernel(16, False)`, chunks of 16.
+  in fp16 over the path window the volume needs only (fits L2), Tx steering in registers in chunks of 16.
+The measured alternatives of each kernel (versions, layouts, chunk sizes) are in notes/gpu.md.
 Phases use the same cancellation-free split as the numpy backend: |p - q| = |p| + e(p, q) with e in float32 and the
 common phase 2 k |p| in float64, reduced mod 2 pi.
 """
 from __future__ import annotations
 
 import functools
-from typing import Any
 
 import numpy as np
 import warp as wp
@@ -29,7 +29,6 @@ MAX_ANTENNAS = 96
 TX_CHUNK = wp.constant(32)          # Tx steering values a thread keeps in registers at a time
 vec_ant = wp.types.vector(length=MAX_ANTENNAS, dtype=wp.float32)
 vec_chunk = wp.types.vector(length=32, dtype=wp.float32)
-vec4h = wp.types.vector(length=4, dtype=wp.float16)
 wp.set_module_options({"max_unroll": 32})
 
 
@@ -150,14 +149,10 @@ def _separable_kernel(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(d
         out[0, i] = total
 
 
-TC_POINTS = wp.constant(64)        # points per block of the tensor-core kernel
+TC_POINTS = wp.constant(64)        # points per block of tc v1 (`_tc_kernel`)
 TC_ANT = wp.constant(96)           # antennas per side, padded (zero signal in the pads)
 TC_K = wp.constant(192)            # 2 * TC_ANT: [cos | sin] columns, [Re | Im] output columns
-TC_BLOCK = 256                     # threads per block
-RANGE_TILED = False                # range gather: blocks of 32 x 8 voxels (measured slower: 934 vs 836 ms), else flat
-TC_VERSION = 2                     # 2: `_make_tc2_kernel` (round 4, CUDA default); 1: `_tc_kernel` (round 2)
-TC2_POINTS = 128                   # points per block of tc v2 (64: 0.47 ms MM-2FSK, 128: 0.37 ms)
-RANGE_VARIANT = (16, False)        # (chunk, paired): `_make_range_kernel` (round 4: 478 ms); None: `_range_kernel` (835)
+TC_BLOCK = 256                     # threads per block (both tc kernels)
 
 
 @wp.func
@@ -255,178 +250,69 @@ def _tc_kernel(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: 
         wp.tile_store(out[0], total, offset=i0)
 
 
-TC2_HALF = wp.constant(48)         # Tx antennas per column half of the v2 kernel (2 x 48 = TC_ANT)
-# Round 7 layout options of tc v2 (see notes/gpu.md): parts = Tx splits per frequency (2: halves of 48, 4: quarters
-# of 24); kpad / npad = zero columns appended to the product's K (M^T and A^T rows) / N (A^T and Y^T columns), so
-# that the dense shared-memory rows are not a multiple of 128 bytes; a_kmajor = A stored (N, K) and passed
-# through `tile_transpose` (K contiguous); erx = "reg" (e_rx tile kept for all frequencies) or "recompute".
-TC2_VARIANT = dict(parts=2, kpad=8, npad=8, a_kmajor=False, erx="reg")   # round 7: kpad = npad = 8 (-44 %)
-TC2_ON_CPU = False                 # checks only: v2 on Warp-CPU (needs TC2_POINTS = TC_BLOCK = 1 there)
+TC2_POINTS = wp.constant(128)      # points per block of tc v2
+TC2_GROUPS = wp.constant(TC_BLOCK // 128)   # threads per point: each takes every TC2_GROUPS-th Tx of a half
+TC2_HALF = wp.constant(48)         # Tx antennas per half (2 x 48 = TC_ANT)
+TC2_PAD = wp.constant(8)           # zero rows/columns that move the shared-memory rows off multiples of 128 bytes
+TC2_KP = wp.constant(200)          # K padded: TC_K + TC2_PAD (rows of M_h^T and A^T)
+TC2_NP = wp.constant(136)          # N padded: TC2_POINTS + TC2_PAD (columns of A^T and Y_h^T; pads never read)
 
 
-@wp.func
-def _cos_pq(p: wp.vec4f, q: wp.vec4f, k: wp.float32) -> wp.float16:
-    return _cos_h(_excess4(p, q), k)
-
-
-@wp.func
-def _sin_pq(p: wp.vec4f, q: wp.vec4f, k: wp.float32) -> wp.float16:
-    return _sin_h(_excess4(p, q), k)
-
-
-@functools.cache
-def _make_tc2_kernel(n_points: int, block_dim: int, parts: int = 2, kpad: int = 0, npad: int = 0,
-                     a_kmajor: bool = False, erx: str = "reg"):
-    """tc v2 (round 4): the transposed product per Tx part, Y_h^T = M_h^T A^T (2Q x P, fp32 accumulation), with
-    M_h^T = rows [Re | Im] of the Tx part h (Q = TC_ANT / parts Tx; 2Q x 192 fp16) and A^T = [cos; sin](k e_rx)
-    (192 x P fp16), so that shared memory is A^T + M_h^T + Y_h^T. The Tx dot runs per thread from the
-    (point-contiguous) Y_h^T columns: thread lane takes point lane % P and every G-th Tx of the part
-    (G = block_dim / P), then `wp.tile` + `tile_sum(axis=0)` combine the G partial sums. Round 7 options (kpad, npad,
-    a_kmajor, erx): see TC2_VARIANT; the defaults give the round-4 kernel."""
-    P = wp.constant(n_points)
-    G = wp.constant(block_dim // n_points)
-    Q = wp.constant(int(TC_ANT) // parts)
-    R = wp.constant(2 * (int(TC_ANT) // parts))
-    KP = wp.constant(int(TC_K) + kpad)
-    NP = wp.constant(n_points + npad)
-    KPAD = wp.constant(max(kpad, 1))
-    recompute = erx == "recompute"
-
-    @wp.kernel(module="unique", module_options={"fast_math": True, "enable_backward": False})
-    def tc2(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: wp.array(dtype=wp.vec4f),
-            k_rad_per_m: wp.array(dtype=wp.float32), gain: wp.array(dtype=wp.float32),
-            mat_h: wp.array4d(dtype=wp.float16), common: wp.array2d(dtype=wp.vec2f), sum_freqs: int, n_half: int,
-            out: wp.array2d(dtype=wp.vec2f)):
-        blk, lane = wp.tid()
-        i0 = blk * P
-        pt = lane % P
-        grp = lane // P
-        p = wp.tile_load(pts, shape=P, offset=i0, storage="shared")
-        qr = wp.tile_load(rx, shape=TC_ANT, storage="shared")
-        qt = wp.tile_load(tx, shape=TC_ANT, storage="shared")
-        if wp.static(a_kmajor):
-            pb = wp.tile_broadcast(wp.tile_reshape(p, shape=(P, 1)), shape=(P, TC_ANT))
-            qb = wp.tile_broadcast(wp.tile_reshape(qr, shape=(1, TC_ANT)), shape=(P, TC_ANT))
-            a = wp.tile_empty(shape=(NP, KP), dtype=wp.float16, storage="shared")
-            if wp.static(kpad > 0):
-                wp.tile_assign(a, wp.tile_zeros(shape=(NP, KPAD), dtype=wp.float16), offset=(0, TC_K))
-        else:
-            pb = wp.tile_broadcast(wp.tile_reshape(p, shape=(1, P)), shape=(TC_ANT, P))
-            qb = wp.tile_broadcast(wp.tile_reshape(qr, shape=(TC_ANT, 1)), shape=(TC_ANT, P))
-            a = wp.tile_empty(shape=(KP, NP), dtype=wp.float16, storage="shared")
-            if wp.static(kpad > 0):
-                wp.tile_assign(a, wp.tile_zeros(shape=(KPAD, NP), dtype=wp.float16), offset=(TC_K, 0))
-        if wp.static(not recompute):
-            e_rx = wp.tile_map(_excess4, pb, qb)
-        y = wp.tile_empty(shape=(R, NP), dtype=wp.float32, storage="shared")
-        pp = p[pt]
-        total = wp.tile_zeros(shape=P, dtype=wp.vec2f)
-        for f in range(k_rad_per_m.shape[0]):
-            k = k_rad_per_m[f]
-            if wp.static(recompute):
-                tc = wp.tile_map(_cos_pq, pb, qb, k)
-                ts = wp.tile_map(_sin_pq, pb, qb, k)
-            else:
-                tc = wp.tile_map(_cos_h, e_rx, k)
-                ts = wp.tile_map(_sin_h, e_rx, k)
-            if wp.static(a_kmajor):
-                wp.tile_assign(a, tc, offset=(0, 0))
-                wp.tile_assign(a, ts, offset=(0, TC_ANT))
-            else:
-                wp.tile_assign(a, tc, offset=(0, 0))
-                wp.tile_assign(a, ts, offset=(TC_ANT, 0))
-            acc = wp.vec2f(0.0, 0.0)
-            for h in range(n_half):                      # run-time bound: one M_h^T allocation, not unrolled
-                m = wp.tile_load(mat_h[f, h], shape=(R, KP), storage="shared", aligned=True)
-                if wp.static(a_kmajor):
-                    wp.tile_matmul(m, wp.tile_transpose(a), y, alpha=1.0, beta=0.0)
-                else:
-                    wp.tile_matmul(m, a, y, alpha=1.0, beta=0.0)
-                for jj in range(grp, Q, G):
-                    d = _tx_dot(y[jj, pt], y[jj + Q, pt], _excess4(pp, qt[h * Q + jj]), k)
-                    acc = acc + d
-            part = wp.tile_reshape(wp.tile(acc, preserve_type=True), shape=(G, P))
-            val = wp.tile_map(_cmul_gain, wp.tile_sum(part, axis=0),
-                              wp.tile_load(common[f], shape=P, offset=i0), gain[f])
-            if sum_freqs == 0:
-                wp.tile_store(out[f], val, offset=i0)
-            else:
-                total = total + val
-        if sum_freqs != 0:
-            wp.tile_store(out[0], total, offset=i0)
-    return tc2
-
-
-@functools.cache
-def _make_range_kernel(chunk: int, paired: bool):
-    """Range gather (flat, thread i = voxel i) with Tx chunks of `chunk` in registers. `paired`: the table holds
-    (g_m, g_m+1 - g_m) as one 8-byte vec4h per sample, so each pair's interpolation is one load (round 4)."""
-    CH = wp.constant(chunk)
-    vec_c = wp.types.vector(length=chunk, dtype=wp.float32)
-
-    @wp.kernel(module="unique", module_options={"enable_backward": False, "max_unroll": 32})
-    def gather(x: wp.array(dtype=wp.float64), y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
-               rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
-               carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
-               profiles: wp.array2d(dtype=Any), out: wp.array2d(dtype=wp.vec2f)):
-        i = wp.tid()
-        nx = x.shape[0]
-        ny = y.shape[0]
-        p64 = wp.vec3d(x[i % nx], y[(i // nx) % ny], z[i // (nx * ny)])
-        norm64 = wp.length(p64)
-        p = wp.vec3f(p64)
-        norm = wp.float32(norm64)
-        n_tx = tx.shape[0]
-        u_max = wp.float32(profiles.shape[1]) - 1.001
+@wp.kernel(module="unique", module_options={"fast_math": True, "enable_backward": False})
+def _tc2_kernel(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: wp.array(dtype=wp.vec4f),
+                k_rad_per_m: wp.array(dtype=wp.float32), gain: wp.array(dtype=wp.float32),
+                mat_h: wp.array4d(dtype=wp.float16), common: wp.array2d(dtype=wp.vec2f), sum_freqs: int,
+                out: wp.array2d(dtype=wp.vec2f)):
+    """tc v2: the transposed product per Tx half, Y_h^T = M_h^T A^T (96 x 128, fp32 accumulation), with M_h^T =
+    rows [Re | Im] of the Tx half h (96 x 192 fp16, `_Inputs.tc2_mat`) and A^T = [cos; sin](k e_rx) (192 x 128
+    fp16), so that shared memory is A^T + M_h^T + Y_h^T. K and N are padded by 8 (zero K rows, unused N columns).
+    The Tx dot runs per thread from the (point-contiguous) Y_h^T columns: thread lane takes point lane % 128 and
+    every TC2_GROUPS-th Tx of the half, then `wp.tile` + `tile_sum(axis=0)` combine the partial sums."""
+    blk, lane = wp.tid()
+    i0 = blk * TC2_POINTS
+    pt = lane % TC2_POINTS
+    grp = lane // TC2_POINTS
+    p = wp.tile_load(pts, shape=TC2_POINTS, offset=i0, storage="shared")
+    qr = wp.tile_load(rx, shape=TC_ANT, storage="shared")
+    qt = wp.tile_load(tx, shape=TC_ANT, storage="shared")
+    pb = wp.tile_broadcast(wp.tile_reshape(p, shape=(1, TC2_POINTS)), shape=(TC_ANT, TC2_POINTS))
+    qb = wp.tile_broadcast(wp.tile_reshape(qr, shape=(TC_ANT, 1)), shape=(TC_ANT, TC2_POINTS))
+    a = wp.tile_empty(shape=(TC2_KP, TC2_NP), dtype=wp.float16, storage="shared")
+    wp.tile_assign(a, wp.tile_zeros(shape=(TC2_PAD, TC2_NP), dtype=wp.float16), offset=(TC_K, 0))  # 0 x garbage: NaN
+    e_rx = wp.tile_map(_excess4, pb, qb)
+    y = wp.tile_empty(shape=(TC_ANT, TC2_NP), dtype=wp.float32, storage="shared")
+    pp = p[pt]
+    total = wp.tile_zeros(shape=TC2_POINTS, dtype=wp.vec2f)
+    for f in range(k_rad_per_m.shape[0]):
+        k = k_rad_per_m[f]
+        wp.tile_assign(a, wp.tile_map(_cos_h, e_rx, k), offset=(0, 0))
+        wp.tile_assign(a, wp.tile_map(_sin_h, e_rx, k), offset=(TC_ANT, 0))
         acc = wp.vec2f(0.0, 0.0)
-        for chunk_i in range(n_tx // CH):
-            t0 = chunk_i * CH
-            u_tx = vec_c()
-            b_re = vec_c()
-            b_im = vec_c()
-            for j in range(CH):
-                e = _excess_m(p, norm, tx[t0 + j])
-                u_tx[j] = e * samples_per_m
-                b_re[j] = wp.cos(k_carrier * e)
-                b_im[j] = wp.sin(k_carrier * e)
-            for r in range(rx.shape[0]):
-                e_rx = _excess_m(p, norm, rx[r])
-                base = (2.0 * norm + e_rx) * samples_per_m - m0
-                row = r * n_tx + t0
-                gb = wp.vec2f(0.0, 0.0)
-                for j in range(CH):
-                    u = wp.clamp(base + u_tx[j], 0.0, u_max)
-                    iu = wp.int32(u)
-                    w = u - wp.float32(iu)
-                    g = _lerp_sample(profiles, row + j, iu, w)
-                    gb += _cmul(g, wp.vec2f(b_re[j], b_im[j]))
-                phase = k_carrier * e_rx
-                acc += _cmul(wp.vec2f(wp.cos(phase), wp.sin(phase)), gb)
-        out[0, i] = _cmul(acc, _phasor_cycles(norm64 * carrier_cycles_per_m))
-    return gather
+        for h in range(mat_h.shape[1]):                  # run-time bound (2): one M_h^T allocation, not unrolled
+            m = wp.tile_load(mat_h[f, h], shape=(TC_ANT, TC2_KP), storage="shared", aligned=True)
+            wp.tile_matmul(m, a, y, alpha=1.0, beta=0.0)
+            for jj in range(grp, TC2_HALF, TC2_GROUPS):
+                d = _tx_dot(y[jj, pt], y[jj + TC2_HALF, pt], _excess4(pp, qt[h * TC2_HALF + jj]), k)
+                acc = acc + d
+        part = wp.tile_reshape(wp.tile(acc, preserve_type=True), shape=(TC2_GROUPS, TC2_POINTS))
+        val = wp.tile_map(_cmul_gain, wp.tile_sum(part, axis=0),
+                          wp.tile_load(common[f], shape=TC2_POINTS, offset=i0), gain[f])
+        if sum_freqs == 0:
+            wp.tile_store(out[f], val, offset=i0)
+        else:
+            total = total + val
+    if sum_freqs != 0:
+        wp.tile_store(out[0], total, offset=i0)
+
+
+RANGE_CHUNK = wp.constant(16)      # Tx steering values the range gather keeps in registers at a time
+vec_range = wp.types.vector(length=16, dtype=wp.float32)
 
 
 @wp.func
 def _lerp_sample(profiles: wp.array2d(dtype=wp.vec2h), row: int, iu: int, w: wp.float32) -> wp.vec2f:
     g0 = wp.vec2f(profiles[row, iu])
     return g0 + w * (wp.vec2f(profiles[row, iu + 1]) - g0)
-
-
-@wp.func
-def _lerp_sample(profiles: wp.array2d(dtype=vec4h), row: int, iu: int, w: wp.float32) -> wp.vec2f:
-    q = profiles[row, iu]
-    return wp.vec2f(wp.float32(q[0]) + w * wp.float32(q[2]), wp.float32(q[1]) + w * wp.float32(q[3]))
-
-
-@wp.kernel(enable_backward=False)
-def _pair_kernel(profiles: wp.array2d(dtype=wp.vec2h), paired: wp.array2d(dtype=vec4h)):
-    """paired[row, j] = (g_j, g_j+1 - g_j) from the fp16 profiles (last column: difference 0)."""
-    row, j = wp.tid()
-    g0 = wp.vec2f(profiles[row, j])
-    d = wp.vec2f(0.0, 0.0)
-    if j + 1 < profiles.shape[1]:
-        d = wp.vec2f(profiles[row, j + 1]) - g0
-    paired[row, j] = vec4h(wp.float16(g0[0]), wp.float16(g0[1]), wp.float16(d[0]), wp.float16(d[1]))
 
 
 @wp.kernel(enable_backward=False)
@@ -443,49 +329,31 @@ def _profile_kernel(signal: wp.array2d(dtype=wp.vec2f), grid_index: wp.array(dty
     profiles[pair, j] = wp.vec2h(_cmul(shift[m], acc))
 
 
-@wp.kernel(enable_backward=False)
-def _range_kernel(tiled: int, x: wp.array(dtype=wp.float64), y: wp.array(dtype=wp.float64),
-                  z: wp.array(dtype=wp.float64),
+@wp.kernel(module="unique", module_options={"enable_backward": False, "max_unroll": 32})
+def _range_kernel(x: wp.array(dtype=wp.float64), y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
                   rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
                   carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
                   profiles: wp.array2d(dtype=wp.vec2h), out: wp.array2d(dtype=wp.vec2f)):
-    """Voxel value: sum over pairs of carrier phasor times the linearly interpolated range profile.
-
-    Tx (padded to a multiple of TX_CHUNK, zero profiles in the pads) in chunks whose sample offsets and carrier
-    phasors stay in registers; the profile window starts at sample m0 (path lengths the volume can reach).
-    With `tiled`, each block of 256 threads takes 32 (x) x 8 (y) voxels of one z plane, so its 8 warps read the
-    same profile rows at nearly the same samples at the same time (L1 hits); else thread i is flat voxel i.
-    """
+    """Voxel value (thread i = flat voxel i): sum over pairs of carrier phasor times the linearly interpolated range
+    profile. Tx (padded to a multiple of TX_CHUNK, zero profiles in the pads) in chunks of RANGE_CHUNK whose sample
+    offsets and carrier phasors stay in registers; the profile window starts at sample m0 (path lengths the volume
+    can reach)."""
     i = wp.tid()
     nx = x.shape[0]
     ny = y.shape[0]
-    ix = i % nx
-    iy = (i // nx) % ny
-    iz = i // (nx * ny)
-    if tiled != 0:
-        lane = i % 256
-        blk = i // 256
-        n_bx = (nx + 31) // 32
-        n_by = (ny + 7) // 8
-        ix = (blk % n_bx) * 32 + lane % 32
-        iy = ((blk // n_bx) % n_by) * 8 + lane // 32
-        iz = blk // (n_bx * n_by)
-        if ix >= nx or iy >= ny:
-            return
-        i = (iz * ny + iy) * nx + ix
-    p64 = wp.vec3d(x[ix], y[iy], z[iz])
+    p64 = wp.vec3d(x[i % nx], y[(i // nx) % ny], z[i // (nx * ny)])
     norm64 = wp.length(p64)
     p = wp.vec3f(p64)
     norm = wp.float32(norm64)
     n_tx = tx.shape[0]
     u_max = wp.float32(profiles.shape[1]) - 1.001
     acc = wp.vec2f(0.0, 0.0)
-    for chunk in range(n_tx // TX_CHUNK):
-        t0 = chunk * TX_CHUNK
-        u_tx = vec_chunk()
-        b_re = vec_chunk()
-        b_im = vec_chunk()
-        for j in range(TX_CHUNK):
+    for chunk_i in range(n_tx // RANGE_CHUNK):
+        t0 = chunk_i * RANGE_CHUNK
+        u_tx = vec_range()
+        b_re = vec_range()
+        b_im = vec_range()
+        for j in range(RANGE_CHUNK):
             e = _excess_m(p, norm, tx[t0 + j])
             u_tx[j] = e * samples_per_m
             b_re[j] = wp.cos(k_carrier * e)
@@ -495,12 +363,11 @@ def _range_kernel(tiled: int, x: wp.array(dtype=wp.float64), y: wp.array(dtype=w
             base = (2.0 * norm + e_rx) * samples_per_m - m0
             row = r * n_tx + t0
             gb = wp.vec2f(0.0, 0.0)
-            for j in range(TX_CHUNK):
+            for j in range(RANGE_CHUNK):
                 u = wp.clamp(base + u_tx[j], 0.0, u_max)
                 iu = wp.int32(u)
                 w = u - wp.float32(iu)
-                g0 = wp.vec2f(profiles[row + j, iu])
-                g = g0 + w * (wp.vec2f(profiles[row + j, iu + 1]) - g0)
+                g = _lerp_sample(profiles, row + j, iu, w)
                 gb += _cmul(g, wp.vec2f(b_re[j], b_im[j]))
             phase = k_carrier * e_rx
             acc += _cmul(wp.vec2f(wp.cos(phase), wp.sin(phase)), gb)
@@ -579,19 +446,18 @@ class _Inputs:
                     wp.array(np.ascontiguousarray(mat), dtype=wp.float16, device=dev))
         return self._get("tc", build)
 
-    def tc2_mat(self, parts: int = 2, kpad: int = 0):
-        """(F, parts, 2Q, TC_K + kpad) fp16, Q = TC_ANT / parts: per Tx part h the rows [M[:, h*Q + j] ; M[:, 96 +
-        h*Q + j]] of M^T, with kpad zero columns appended (round 7 layout option)."""
+    def tc2_mat(self):
+        """(F, 2, 96, TC2_KP) fp16: per Tx half h the rows [M[:, h*48 + j] ; M[:, 96 + h*48 + j]] of M^T, with TC2_PAD
+        zero columns appended."""
         def build():
             mat = self.tc_tables()[3].numpy().astype(np.float16)           # (F, 192, 192)
-            n, hh = int(TC_ANT), int(TC_ANT) // parts
+            n, hh = int(TC_ANT), int(TC2_HALF)
             halves = [np.concatenate([mat[:, :, h * hh:(h + 1) * hh], mat[:, :, n + h * hh:n + (h + 1) * hh]],
-                                     axis=2).transpose(0, 2, 1) for h in range(parts)]
+                                     axis=2).transpose(0, 2, 1) for h in range(2)]
             m = np.stack(halves, axis=1)
-            if kpad:
-                m = np.concatenate([m, np.zeros(m.shape[:3] + (kpad,), dtype=np.float16)], axis=3)
+            m = np.concatenate([m, np.zeros(m.shape[:3] + (int(TC2_PAD),), dtype=np.float16)], axis=3)
             return wp.array(np.ascontiguousarray(m), dtype=wp.float16, device=self.device)
-        return self._get(("tc2", parts, kpad), build)
+        return self._get("tc2", build)
 
 
 FRAME_CACHE_SIZE = 4
@@ -658,31 +524,14 @@ def _range_launch(inputs: _Inputs, freqs_hz, points, x, y, z, out, grid_m):
     index = wp.array(rplan.grid_index.astype(np.int32), dtype=wp.int32, device=dev)
     profiles = wp.empty((n_rx * n_tx_pad, n_window), dtype=wp.vec2h, device=dev)
     k_c = 2 * np.pi * rplan.f_carrier_hz / C_M_PER_S
-    gather_args = [int(RANGE_TILED), x, y, z, inputs.rx, inputs.tx_padded, float(k_c),
-                   2.0 * rplan.f_carrier_hz / C_M_PER_S, float(rplan.samples_per_m), float(m0), profiles, out]
-    nx, ny, nz = x.shape[0], y.shape[0], z.shape[0]
-    n_threads = 256 * ((nx + 31) // 32) * ((ny + 7) // 8) * nz if RANGE_TILED else out.shape[1]
-
-    variant = RANGE_VARIANT
-    if variant is not None:
-        chunk, paired = variant
-        if n_tx_pad % chunk:
-            raise ValueError(f"range chunk {chunk} must divide the padded Tx count {n_tx_pad}")
-        table = wp.empty((n_rx * n_tx_pad, n_window), dtype=vec4h, device=dev) if paired else profiles
-        gather_args = [x, y, z, inputs.rx, inputs.tx_padded, wp.float32(k_c),
-                       wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S), wp.float32(rplan.samples_per_m),
-                       wp.float32(m0), table, out]
-        n_threads = out.shape[1]
+    gather_args = [x, y, z, inputs.rx, inputs.tx_padded, wp.float32(k_c),
+                   wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S), wp.float32(rplan.samples_per_m),
+                   wp.float32(m0), profiles, out]
 
     def run():
         wp.launch(_profile_kernel, dim=(n_rx * n_tx_pad, n_window), inputs=[sig, index, twiddle, shift, int(m0) % rplan.n_samples,
                                                                            profiles], device=dev)
-        if variant is None:
-            wp.launch(_range_kernel, dim=n_threads, inputs=gather_args, block_dim=256, device=dev)
-            return out
-        if variant[1]:
-            wp.launch(_pair_kernel, dim=(n_rx * n_tx_pad, n_window), inputs=[profiles, table], device=dev)
-        wp.launch(_make_range_kernel(*variant), dim=n_threads, inputs=gather_args, block_dim=256, device=dev)
+        wp.launch(_range_kernel, dim=out.shape[1], inputs=gather_args, block_dim=256, device=dev)
         return out
     return run
 
@@ -726,11 +575,9 @@ def make_launch(signal, freqs_hz, tx_m, rx_m, *, device: str, kernel: str, point
             pts = wp.empty(n_out, dtype=wp.vec4f, device=dev)
             common = wp.empty((inputs.n_freqs, n_out), dtype=wp.vec2f, device=dev)
         prep_args = [flag, points, x, y, z, inputs.cycles, pts, common]
-        if TC_VERSION == 2 and (dev != "cpu" or TC2_ON_CPU):           # (v2 needs real blocks: Warp-CPU runs block_dim 1)
-            v = TC2_VARIANT
-            tc_kernel, n_tile = _make_tc2_kernel(TC2_POINTS, TC_BLOCK, **v), TC2_POINTS
-            tc_args = [pts, rx4, tx4, inputs.k, gain, inputs.tc2_mat(v["parts"], v["kpad"]), common,
-                       int(sum_freqs), v["parts"], out]
+        if dev != "cpu":                 # (v2 needs real blocks: Warp-CPU runs block_dim 1, so it keeps v1)
+            tc_kernel, n_tile = _tc2_kernel, int(TC2_POINTS)
+            tc_args = [pts, rx4, tx4, inputs.k, gain, inputs.tc2_mat(), common, int(sum_freqs), out]
         else:
             tc_kernel, n_tile = _tc_kernel, int(TC_POINTS)
             tc_args = [pts, rx4, tx4, inputs.k, gain, mat, common, int(sum_freqs), out]
