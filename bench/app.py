@@ -56,6 +56,8 @@ def _ensure_synthetic(dataset: DictConfig, root: Path) -> None:
     from bench.synth import SynthConfig, generate_catalogue
     from bench.synth.generate import MANIFEST_NAME
 
+    if root.exists() and not root.is_dir():
+        raise DatasetError(root, "dataset root is not a directory")
     if root.is_dir() and any(root.iterdir()) and not (root / MANIFEST_NAME).is_file():
         log.info("%s holds data the generator did not write: reading it as it is, generating nothing", root)
         return

@@ -60,7 +60,12 @@ def main() -> int:
     (args.results / "table1.md").write_text(tables.to_markdown(table1) + "\n")
     texts = [f"Table I: frequency configurations\n\n{tables.to_markdown(table1)}"]
     for experiment in EXPERIMENTS:
-        rows = sweep(experiment, root, out, store)
+        try:
+            rows = sweep(experiment, root, out, store)
+        except subprocess.CalledProcessError as err:   # the sweep printed its own error on stderr
+            print(f"error: the {experiment} sweep failed (exit {err.returncode}); its jobs are under "
+                  f"{out / experiment}", file=sys.stderr)
+            return 1
         publish(out / experiment, rows, experiment, args.results)
         texts.append((out / experiment / f"{experiment}.md").read_text())
         print(f"{experiment}: {len(rows)} rows, {int((~rows.cached).sum())} computed, {int(rows.cached.sum())} "
