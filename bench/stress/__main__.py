@@ -10,9 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.stress import hostile, noise, plots, precision, prior_degradation, wrapping
-from bench.stress.summary import write_summary
-from bench.synth import SynthConfig, generate_capture
+from bench.stress import precision   # the other experiments import Open3D (via the generator): imported in run()
 
 FULL = {"distances_m": (0.2, 0.3, 0.4, 0.5, 0.6), "grid_sizes": (11, 61, 151), "n_ref": 48,
         "snrs_db": tuple(range(-10, 45, 5)), "noise_configs": ("d05", "d10"),
@@ -23,6 +21,8 @@ QUICK = {"distances_m": (0.2, 0.6), "grid_sizes": (11, 41), "n_ref": 16, "snrs_d
 
 def _knobs(n_values: int | None) -> dict:
     """The prior-degradation sweep; with n_values, the first, a middle and the last value of each knob."""
+    from bench.stress import prior_degradation
+
     if n_values is None:
         return prior_degradation.KNOBS
     return {k: tuple(v[i] for i in np.unique(np.linspace(0, len(v) - 1, n_values).round().astype(int)))
@@ -31,6 +31,9 @@ def _knobs(n_values: int | None) -> dict:
 
 def run(out: Path, quick: bool, seed: int = 0, log=print) -> dict[str, list[dict]]:
     """Run all experiments, write OUT/<name>.csv, OUT/<name>.png and OUT/summary.md; return the rows."""
+    from bench.stress import hostile, noise, prior_degradation, wrapping
+    from bench.synth import SynthConfig, generate_capture
+
     size = QUICK if quick else FULL
     out.mkdir(parents=True, exist_ok=True)
     results, seconds = {}, {}
@@ -53,11 +56,35 @@ def run(out: Path, quick: bool, seed: int = 0, log=print) -> dict[str, list[dict
     with tempfile.TemporaryDirectory() as tmp:
         source = generate_capture(Path(tmp) / "source", "01_plate", 30, SynthConfig(frequency_points=16, seed=seed))
         step("hostile", lambda: hostile.hostile_rows(source, Path(tmp) / "work"))
+    pd.DataFrame({"experiment": list(seconds), "seconds": list(seconds.values())}).to_csv(
+        out / "timings.csv", index=False, float_format="%.1f")
+    _report(out, results, seconds, quick)
+    return results
+
+
+def _report(out: Path, results: dict[str, list[dict]], seconds: dict[str, float], quick: bool) -> None:
+    from bench.stress import plots
+    from bench.stress.summary import write_summary
+
     for name, plot in (("precision", plots.plot_precision), ("wrapping", plots.plot_wrapping),
                        ("noise", plots.plot_noise), ("prior_degradation", plots.plot_prior)):
         plot(results[name], out / f"{name}.png")
     write_summary(results, seconds, quick, out / "summary.md")
-    return results
+
+
+def add_precision_rows(out: Path, extra_csv: Path) -> None:
+    """Merge precision rows measured on another machine (e.g. `--precision-only` on a GPU) into the full report
+    in `out`, replacing rows of the same devices, and rewrite its plots and summary."""
+    names = ("precision", "wrapping", "wrapping_boundaries", "noise", "prior_degradation", "prior_breaks", "hostile")
+    results = {name: pd.read_csv(out / f"{name}.csv").to_dict("records") for name in names}
+    extra = pd.read_csv(extra_csv)
+    kept = pd.DataFrame(results["precision"])
+    kept = kept[~kept.device.isin(extra.device.unique())]
+    merged = pd.concat([kept, extra], ignore_index=True)
+    merged.to_csv(out / "precision.csv", index=False, float_format="%.6g")
+    results["precision"] = merged.to_dict("records")
+    timings = pd.read_csv(out / "timings.csv")
+    _report(out, results, dict(zip(timings.experiment, timings.seconds)), quick=False)
 
 
 def main(argv=None) -> int:
@@ -65,9 +92,23 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=Path("results/stress"), help="output folder")
     parser.add_argument("--quick", action="store_true", help="small sweeps (seconds), for tests")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--precision-only", action="store_true",
+                        help="only the precision sweep on every device Warp sees (e.g. on a GPU machine without "
+                             "Open3D); writes OUT/precision.csv")
+    parser.add_argument("--add-precision", type=Path, metavar="CSV",
+                        help="merge precision rows from another machine into the report in OUT")
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    run(args.out, args.quick, args.seed)
+    if args.precision_only:
+        size = QUICK if args.quick else FULL
+        rows = precision.precision_rows(size["distances_m"], size["grid_sizes"], precision.available_devices(),
+                                        size["n_ref"], args.seed)
+        args.out.mkdir(parents=True, exist_ok=True)
+        pd.DataFrame(rows).to_csv(args.out / "precision.csv", index=False, float_format="%.6g")
+    elif args.add_precision:
+        add_precision_rows(args.out, args.add_precision)
+    else:
+        run(args.out, args.quick, args.seed)
     print(f"stress report written to {args.out} in {time.perf_counter() - start:.0f} s")
     return 0
 

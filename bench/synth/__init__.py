@@ -4,9 +4,19 @@ Public API: `simulate_frame` (point scatterers -> frame), `generate_capture`, `g
 `SynthConfig`, `CATALOGUE`. See bench/synth/README.md.
 """
 from bench.synth.config import SynthConfig
-from bench.synth.generate import CaptureResult, ensure_capture, generate_capture, generate_catalogue
 from bench.synth.radar_model import simulate_frame
 from bench.synth.scenes import CATALOGUE, build_scene
 
+_NEED_OPEN3D = {"CaptureResult", "ensure_capture", "generate_capture", "generate_catalogue"}
+
 __all__ = ["CATALOGUE", "CaptureResult", "SynthConfig", "build_scene", "ensure_capture", "generate_capture",
            "generate_catalogue", "simulate_frame"]
+
+
+def __getattr__(name: str):
+    """The capture writer needs Open3D (ray casting): import it on first use, so that `simulate_frame` works on
+    machines without Open3D (the GPU test machine)."""
+    if name in _NEED_OPEN3D:
+        from bench.synth import generate
+        return getattr(generate, name)
+    raise AttributeError(f"module 'bench.synth' has no attribute {name!r}")

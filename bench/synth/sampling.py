@@ -9,7 +9,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 
 from bench.synth.meshes import indexed, triangle_normals
 
@@ -46,6 +45,8 @@ def bisect_triangles(tris_m: np.ndarray, max_edge_m: float) -> np.ndarray:
 def visible_samples(part_tris_m: list[np.ndarray], spacing_m: float,
                     viewpoint_m=(0.0, 0.0, 0.0)) -> SurfaceSamples:
     """Samples of all parts' surfaces that face `viewpoint_m` and are not occluded (any part can occlude)."""
+    import open3d as o3d   # here only: the signal model (`simulate_frame`) must import without Open3D
+
     viewpoint_m = np.asarray(viewpoint_m, dtype=np.float64)
     scene = o3d.t.geometry.RaycastingScene()
     vertices, triangles = indexed(np.concatenate(part_tris_m))
