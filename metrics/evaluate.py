@@ -1,17 +1,26 @@
-"""The paper's four metrics for one reconstruction against the capture's ground truth (MAROON_FORMAT.md 5).
+"""The paper's four metrics for one reconstruction against the capture's ground truth (MAROON_FORMAT.md 5), with
+the pixel counts behind each and the false positives the paper's P cannot see.
 
-Sound definitions (the default):
+Sound definitions (the default), all on one metric grid per capture (the capture's calibration grid; a depth map
+computed on another grid is resampled first, metrics.resample):
 * radar points: pixels with a valid depth that are vertices of the grid triangulation (threshold 1 cm) and lie
   inside `mask_bb`, at the exact pixel-centre coordinates `(grid_x[j], grid_y[ny-1-i], depth)`;
 * ground truth: the mesh in radar space rasterised onto the same pixel centres (nearest surface), triangulated the
   same way and restricted to `mask_bb`;
+* the object's silhouette: ground-truth pixels inside `mask_bb`, closed with the erosion kernel (fills gaps
+  narrower than it); the eroded silhouette: the silhouette eroded by MAROON's kernel converted to millimetres
+  (metrics.masks) - the same region for every method, whatever its own validity mask looks like;
 * C_s = Chamfer(radar -> GT), C_g = Chamfer(GT -> radar) with KD-trees;
-* P = mean |D_radar - D_gt| over radar points whose pixel has ground truth (GT holes are not errors);
-* P_e = P with the radar mask eroded by round(mask_erosion / 4) pixels (after triangulation).
-`faithful=True` reproduces the reference code instead: GT sampled at MAROON's half-voxel-shifted positions,
-radar points mapped to GT pixels by `floor(K p)` (two columns share a GT column), GT holes counted as errors of
-1000 z mm, points projecting outside the image counted as 0 error, three-valid quads not triangulated.
-All values in centimetres; NaN (never a made-up number) when no point is left to compare.
+* P = mean |D_radar - D_gt| over radar points on the silhouette with ground truth; P_e the same on the eroded
+  silhouette;
+* off = share (%) of radar points off the silhouette (false positives: the paper's P never sees them), off_err
+  their mean distance to the nearest ground-truth point.
+`faithful=True` reproduces the reference code for C_g, C_s, P and P_e instead: GT sampled at MAROON's
+half-voxel-shifted positions, radar points mapped to GT pixels by `floor(K p)` (two columns share a GT column), GT
+holes counted as errors of 1000 z mm, points projecting outside the image counted as 0 error, three-valid quads
+not triangulated, P_e on the radar's own validity mask eroded by round(mask_erosion / 4) pixels.
+Values in centimetres; a metric is NaN (never a made-up number) when no point is left to compare, and `failure`
+then names the reason: a row with a failure is counted as a failed capture by the tables, never dropped.
 """
 from __future__ import annotations
 
@@ -21,31 +30,34 @@ import numpy as np
 
 from bench.alignment import apply_transform
 from bench.capture import Capture, RadarGrid
-from metrics.chamfer import PointSet, one_sided_chamfer_m
+from metrics.chamfer import PointSet, nearest_distances_m, one_sided_chamfer_m
 from metrics.groundtruth import rasterise_depth_m
-from metrics.masks import erode_mask, inside_mask_bb, radar_erosion_kernel_px
+from metrics.masks import (MAROON_RADAR_PITCH_MM, close_mask, erode_mask, erosion_kernel_mm, inside_mask_bb,
+                           kernel_px_for_pitch, radar_erosion_kernel_px)
 from metrics.triangulation import triangulated_vertices
 
 TRIANGULATION_THRESHOLD_M = 0.01
 METRIC_COLUMNS = ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm")
+COUNT_COLUMNS = ("C_g_px", "C_s_px", "P_px", "P_e_px", "off_px", "outside_bb_px")
+SCORE_COLUMNS = (*METRIC_COLUMNS, "off_pct", "off_err_cm", *COUNT_COLUMNS, "failure")
 
 
 @dataclass
 class GroundTruth:
-    """Ground truth of one capture on one pixel grid; build once, evaluate every method against it."""
+    """Ground truth of one capture on its metric grid; build once per capture, evaluate every method against it."""
 
     grid: RadarGrid
-    depth_m: np.ndarray          # (ny, nx) at the pixel centres, NaN = no surface
-    points: PointSet             # triangulated GT points inside mask_bb, metres
+    depth_m: np.ndarray           # (ny, nx) at the pixel centres, NaN = no surface
+    points: PointSet              # triangulated GT points inside mask_bb, metres
+    silhouette: np.ndarray        # (ny, nx) bool: the object (GT inside mask_bb), closed
+    eroded_silhouette: np.ndarray  # (ny, nx) bool: the silhouette eroded by the P_e kernel
     mask_bb_m: dict[str, float]
     mask_erosion: int
     faithful_depth_m: np.ndarray  # (ny, nx) at MAROON's sample positions K^-1 (u + 0.5, v + 0.5)
 
 
-def _pixel_points_m(grid: RadarGrid, depth_m: np.ndarray, x_m: np.ndarray | None = None,
-                    y_m: np.ndarray | None = None) -> np.ndarray:
-    if x_m is None:
-        x_m, y_m = grid.pixel_xy_m()
+def _pixel_points_m(grid: RadarGrid, depth_m: np.ndarray) -> np.ndarray:
+    x_m, y_m = grid.pixel_xy_m()
     return np.stack([x_m, y_m, depth_m], axis=-1)
 
 
@@ -56,6 +68,12 @@ def _maroon_sample_xy_m(grid: RadarGrid) -> tuple[np.ndarray, np.ndarray]:
     return (u - k[0, 3]) / k[0, 0], (v - k[1, 3]) / k[1, 1]
 
 
+def pixel_pitch_mm(grid: RadarGrid) -> float:
+    """The finer of the two lateral pixel pitches of `grid` in millimetres."""
+    pitches = [(hi - lo) / (n - 1) for lo, hi, n in zip(grid.bb_min_m[:2], grid.bb_max_m[:2], grid.size[:2]) if n > 1]
+    return 1000.0 * min(pitches) if pitches else MAROON_RADAR_PITCH_MM
+
+
 def ground_truth(capture: Capture, grid: RadarGrid) -> GroundTruth:
     """Rasterise the capture's photogrammetry mesh (through `photogrammetry2radar`) onto `grid`."""
     if capture.mesh is None:
@@ -64,21 +82,26 @@ def ground_truth(capture: Capture, grid: RadarGrid) -> GroundTruth:
         raise ValueError(f"{capture.path}: alignment has no 'photogrammetry2radar' transform")
     vertices_m = apply_transform(capture.transforms["photogrammetry2radar"], capture.mesh.vertices)
     depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid)
-    sx_m, sy_m = _maroon_sample_xy_m(grid)
-    faithful_depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid, xy_m=(sx_m, sy_m))
-    used = triangulated_vertices(depth_m, TRIANGULATION_THRESHOLD_M)
-    points_m = _pixel_points_m(grid, depth_m)[used]
-    points_m = points_m[inside_mask_bb(points_m, capture.metadata.mask_bb_m)]
-    return GroundTruth(grid=grid, depth_m=depth_m, points=PointSet(points_m), mask_bb_m=capture.metadata.mask_bb_m,
+    faithful_depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid, xy_m=_maroon_sample_xy_m(grid))
+    mask_bb_m = capture.metadata.mask_bb_m
+    points_m = _pixel_points_m(grid, np.nan_to_num(depth_m))
+    on_object = np.isfinite(depth_m) & inside_mask_bb(points_m.reshape(-1, 3), mask_bb_m).reshape(depth_m.shape)
+    used = triangulated_vertices(depth_m, TRIANGULATION_THRESHOLD_M) & on_object
+    kernel_px = kernel_px_for_pitch(erosion_kernel_mm(capture.metadata.mask_erosion), pixel_pitch_mm(grid))
+    silhouette = close_mask(on_object, kernel_px)
+    return GroundTruth(grid=grid, depth_m=depth_m, points=PointSet(points_m[used]), silhouette=silhouette,
+                       eroded_silhouette=erode_mask(silhouette, kernel_px), mask_bb_m=mask_bb_m,
                        mask_erosion=capture.metadata.mask_erosion, faithful_depth_m=faithful_depth_m)
 
 
-def _projective_cm(depth_m: np.ndarray, selected: np.ndarray, gt: GroundTruth, faithful: bool) -> float:
-    if not faithful:
-        compared = selected & np.isfinite(gt.depth_m)
-        if not compared.any():
-            return float("nan")
-        return float(np.mean(np.abs(depth_m[compared] - gt.depth_m[compared])) * 100.0)
+def _mean_abs_cm(depth_m: np.ndarray, gt_depth_m: np.ndarray, compared: np.ndarray) -> float:
+    if not compared.any():
+        return float("nan")
+    return float(np.mean(np.abs(depth_m[compared] - gt_depth_m[compared])) * 100.0)
+
+
+def _reference_projective_cm(depth_m: np.ndarray, selected: np.ndarray, gt: GroundTruth) -> float:
+    """The reference code's P: floor(K p) mapping, GT holes 1000 z mm, off-image points 0 (both counted)."""
     if not selected.any():
         return float("nan")
     k = gt.grid.intrinsics()
@@ -93,8 +116,21 @@ def _projective_cm(depth_m: np.ndarray, selected: np.ndarray, gt: GroundTruth, f
     return float(np.mean(np.abs(errors_mm)) / 10.0)
 
 
-def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> dict[str, float]:
-    """C_g, C_s, P and P_e in centimetres for a depth map (metres, NaN = invalid) on `gt.grid`."""
+def _failure(depth_m: np.ndarray, used: np.ndarray, selected: np.ndarray, scores: dict) -> str:
+    """Why a metric is NaN ('' when all four are numbers)."""
+    if not np.isfinite(depth_m).any():
+        return "no valid pixel"
+    if not used.any():
+        return "no triangulated pixel"
+    if not selected.any():
+        return "no radar point inside mask_bb"
+    missing = [name for name in METRIC_COLUMNS if not np.isfinite(scores[name])]
+    return f"{', '.join(missing)}: no point to compare" if missing else ""
+
+
+def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> dict[str, float | int | str]:
+    """Metrics (cm), off-object share (%), pixel counts and `failure` for a depth map (metres, NaN = invalid) on
+    `gt.grid`; the keys are SCORE_COLUMNS."""
     depth_m = np.asarray(depth_m, dtype=np.float64)
     if depth_m.shape != gt.grid.image_shape:
         raise ValueError(f"depth map {depth_m.shape} does not match the ground-truth grid {gt.grid.image_shape}")
@@ -103,10 +139,34 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
     selected = used.copy()
     selected[used] = inside_mask_bb(points_m[used], gt.mask_bb_m)
     radar_points_m = points_m[selected]
-    eroded = selected & erode_mask(np.isfinite(depth_m), radar_erosion_kernel_px(gt.mask_erosion))
-    return {
+    has_gt = np.isfinite(gt.depth_m)
+    off = selected & ~gt.silhouette
+    if faithful:
+        eroded = selected & erode_mask(np.isfinite(depth_m), radar_erosion_kernel_px(gt.mask_erosion))
+        p_px, p_e_px = int(selected.sum()), int(eroded.sum())
+        p_cm, p_e_cm = _reference_projective_cm(depth_m, selected, gt), _reference_projective_cm(depth_m, eroded, gt)
+    else:
+        on, on_eroded = selected & gt.silhouette & has_gt, selected & gt.eroded_silhouette & has_gt
+        p_px, p_e_px = int(on.sum()), int(on_eroded.sum())
+        p_cm, p_e_cm = _mean_abs_cm(depth_m, gt.depth_m, on), _mean_abs_cm(depth_m, gt.depth_m, on_eroded)
+    off_points_m = points_m[off]
+    off_err_cm = (float(np.mean(nearest_distances_m(off_points_m, gt.points))) * 100.0
+                  if len(off_points_m) and len(gt.points.points_m) else float("nan"))
+    scores = {
         "C_g_cm": one_sided_chamfer_m(gt.points.points_m, PointSet(radar_points_m)) * 100.0,
         "C_s_cm": one_sided_chamfer_m(radar_points_m, gt.points) * 100.0,
-        "P_cm": _projective_cm(depth_m, selected, gt, faithful),
-        "P_e_cm": _projective_cm(depth_m, eroded, gt, faithful),
+        "P_cm": p_cm, "P_e_cm": p_e_cm,
+        "off_pct": 100.0 * off.sum() / selected.sum() if selected.any() else float("nan"),
+        "off_err_cm": off_err_cm,
+        "C_g_px": len(gt.points.points_m), "C_s_px": len(radar_points_m), "P_px": p_px, "P_e_px": p_e_px,
+        "off_px": int(off.sum()), "outside_bb_px": int((used & ~selected).sum()),
     }
+    scores["failure"] = _failure(depth_m, used, selected, scores)
+    return scores
+
+
+def no_ground_truth_scores(reason: str) -> dict[str, float | int | str]:
+    """SCORE_COLUMNS of a capture that cannot be evaluated (e.g. no mesh): NaN metrics, zero counts, `reason`."""
+    scores = {name: float("nan") for name in (*METRIC_COLUMNS, "off_pct", "off_err_cm")}
+    scores.update(dict.fromkeys(COUNT_COLUMNS, 0), failure=reason)
+    return scores

@@ -1,10 +1,16 @@
-"""Masks of the MAROON metrics: `mask_bb` bounds in radar space and the P_e mask erosion (5.2, 5.4)."""
+"""Masks of the metrics: `mask_bb` bounds in radar space, the object's silhouette and the P_e erosion (5.2, 5.4).
+
+MAROON erodes with a k x k kernel of k = round(mask_erosion / 4) radar pixels on its 1 mm radar grid (the metadata
+value is defined for the Kinect resolution); that is a kernel of k millimetres, converted here to the pixels of
+whatever metric grid is used, so the same object is eroded by the same width on every grid.
+"""
 from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
 
-_MIN_KEPT_PX = 10   # MAROON retries with a smaller kernel while the eroded mask keeps <= 10 pixels
+MAROON_RADAR_PITCH_MM = 1.0   # MAROON's radar image: 301 pixels over 0.30 m
+_MIN_KEPT_PX = 10             # MAROON retries with a smaller kernel while the eroded mask keeps <= 10 pixels
 
 
 def inside_mask_bb(points_m: np.ndarray, mask_bb_m: dict[str, float]) -> np.ndarray:
@@ -20,8 +26,18 @@ def inside_mask_bb(points_m: np.ndarray, mask_bb_m: dict[str, float]) -> np.ndar
 
 
 def radar_erosion_kernel_px(mask_erosion: int) -> int:
-    """Radar kernel size from metadata `mask_erosion`: Python's round(E / 4) (banker's: 10 -> 2, 20 -> 5)."""
+    """MAROON's radar kernel from metadata `mask_erosion`: Python's round(E / 4) (banker's: 10 -> 2, 20 -> 5)."""
     return int(round(mask_erosion / 4))
+
+
+def erosion_kernel_mm(mask_erosion: int) -> float:
+    """The P_e erosion width in millimetres: MAROON's radar kernel times its 1 mm radar pixel pitch."""
+    return radar_erosion_kernel_px(mask_erosion) * MAROON_RADAR_PITCH_MM
+
+
+def kernel_px_for_pitch(kernel_mm: float, pitch_mm: float) -> int:
+    """A kernel of `kernel_mm` in pixels of `pitch_mm` (at least 1: no erosion)."""
+    return max(1, int(round(kernel_mm / pitch_mm)))
 
 
 def erode_mask(mask: np.ndarray, kernel_px: int) -> np.ndarray:
@@ -36,3 +52,13 @@ def erode_mask(mask: np.ndarray, kernel_px: int) -> np.ndarray:
         if eroded.sum() > _MIN_KEPT_PX:
             return eroded
     return mask.copy()
+
+
+def close_mask(mask: np.ndarray, kernel_px: int) -> np.ndarray:
+    """Morphological closing with a k x k rectangle: fills gaps narrower than k pixels, image border included."""
+    mask = np.asarray(mask, dtype=bool)
+    if kernel_px <= 1:
+        return mask.copy()
+    padded = np.pad(mask, kernel_px)
+    closed = ndimage.binary_closing(padded, structure=np.ones((kernel_px, kernel_px), dtype=bool))
+    return closed[kernel_px:-kernel_px, kernel_px:-kernel_px] | mask
