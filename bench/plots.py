@@ -23,18 +23,33 @@ def pareto_front(runtime_ms: np.ndarray, error_cm: np.ndarray) -> np.ndarray:
 
 
 def runtime_vs_error(summary: pd.DataFrame, path: Path, title: str) -> Path:
-    """Mean runtime (ms, log) against mean P (cm, log) per summary row, the Pareto front marked and joined."""
+    """Mean runtime (ms, log) against mean P (cm, log) per summary row (bench.tables.summarise), the Pareto front
+    marked and joined. Only rows with a runtime measured alone are drawn; rows that failed on some capture are
+    drawn hollow and take no part in the front (their mean covers fewer captures)."""
+    shown = summary[np.isfinite(summary.runtime_ms) & np.isfinite(summary.P_cm)]
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
-    for method, group in summary.groupby("method", sort=False):
-        ax.scatter(group.runtime_ms, group.P_cm, label=method, s=30)
+    for method, group in shown.groupby("method", sort=False):
+        colour = ax.scatter([], [], s=30).get_facecolor()[0]
+        ax.scatter(group.runtime_ms, group.P_cm, label=method, s=30,
+                   facecolors=[colour if ok else "none" for ok in group.comparable], edgecolors=[colour])
         for _, row in group.iterrows():
-            ax.annotate(row.row, (row.runtime_ms, row.P_cm), fontsize=7, xytext=(3, 3), textcoords="offset points")
-    front = summary[pareto_front(summary.runtime_ms, summary.P_cm)].sort_values("runtime_ms")
+            label = row.row if row.comparable else f"{row.row} (failed {row.captures - row.ok}/{row.captures})"
+            ax.annotate(label, (row.runtime_ms, row.P_cm), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ranked = shown[shown.comparable]
+    front = ranked[pareto_front(ranked.runtime_ms, ranked.P_cm)].sort_values("runtime_ms")
     ax.step(front.runtime_ms, front.P_cm, where="post", color="k", lw=1, ls="--")
     ax.scatter(front.runtime_ms, front.P_cm, s=120, facecolors="none", edgecolors="k", label="Pareto front")
-    ax.set(xscale="log", yscale="log", xlabel="runtime per frame (ms)", ylabel="mean P (cm)", title=title)
+    missing = len(summary) - len(shown)
+    note = f"\n{missing} of {len(summary)} rows have no runtime measured alone and are not drawn" if missing else ""
+    ax.set(xlabel="runtime per frame, measured alone (ms)", ylabel="mean P (cm)", title=f"{title}{note}")
+    if len(shown):
+        ax.set(xscale="log", yscale="log")
+    else:
+        ax.text(0.5, 0.5, "no runtime measured alone\n(run the sweep one job at a time)", ha="center",
+                transform=ax.transAxes)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    if len(shown):
+        ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

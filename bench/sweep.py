@@ -57,7 +57,7 @@ class MergeResults(Callback):
 def main() -> int:
     parser = argparse.ArgumentParser(prog="python -m bench.sweep", description=__doc__)
     parser.add_argument("root", type=Path)
-    parser.add_argument("--table", choices=sorted(tables.CAPTIONS))
+    parser.add_argument("--table", choices=sorted(tables.TITLES))
     args = parser.parse_args()
     print(tables.summary_markdown(report(args.root, args.table)))
     return 0

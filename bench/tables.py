@@ -2,11 +2,16 @@
 
 Table I lists, per two-frequency configuration, the frequencies actually selected from the MAROON sweep
 `linspace(72, 82, 128)` GHz, their difference and the maximum unambiguous depth correction c / (4 delta_f).
-Tables II and III (and the runtime table) average result rows over captures like the paper, one line per method x
-frequency configuration x prior, metrics in centimetres, the best value per metric in bold (BP_max excluded, as in
-the paper: it is the many-frequency reference, not a high-speed method). PATH is a sweep root (its merged
-`results.csv`, else the jobs' `*/results.csv`) or a results CSV; by default the committed `results/<table>/`.
-Markdown goes to stdout.
+Tables II and III (and the runtime table) summarise result rows per method x frequency configuration x prior x
+grid, metrics in centimetres, in the paper's row order. Counting rule: the table's captures are every capture
+any row was run on; a capture where a row has no row or a metric is undefined (`failure`) is a failed capture of
+that row, never a missing value. `ok` counts each row's successes; a row that failed anywhere is marked † (not
+comparable): its means cover only its successes and it is not ranked. Every other row is a mean over the same
+captures for every metric. The best value per metric among the comparable rows is in bold (BP_max excluded, as in
+the paper: it is the many-frequency reference, not a high-speed method). Runtimes are means over rows timed alone
+(`timing == alone`); rows timed while other jobs shared the machine are never shown as runtimes. PATH is a sweep
+root (its merged `results.csv`, else the jobs' `*/results.csv`) or a results CSV; by default the committed
+`results/<table>/`. Markdown goes to stdout.
 """
 from __future__ import annotations
 
@@ -23,12 +28,14 @@ RESULTS_DIR = Path(__file__).resolve().parents[1] / "results"
 METRICS_CM = ["C_g_cm", "C_s_cm", "P_cm", "P_e_cm"]
 METHOD_LABELS = {"bp": "BP", "2fsk": "2FSK", "3fsk": "3FSK", "mm2fsk": "MM-2FSK"}
 GROUP_COLUMNS = ["method", "freq", "prior", "grid"]
+CAPTURE_COLUMNS = ["object", "distance", "frame"]
 FREQ_ORDER = ["full", *(name for name in CONFIGS_GHZ if name != "full")]       # BP_max first, as in the paper
-CAPTIONS = {
-    "table2": "Table II: MM-2FSK with the photogrammetry (ground-truth) prior per frequency configuration.",
-    "table3": "Table III: BP, 2FSK, 3FSK and MM-2FSK (RealSense prior; 2FSK/3FSK from the scalar 0.40 m prior).",
-    "runtime": "Runtime and error of every method and configuration.",
-}
+TITLES = {"table2": "Table II", "table3": "Table III", "runtime": "Runtime and error"}
+PRIOR_WORDS = {"photogrammetry": "the photogrammetry (ground-truth) prior", "realsense": "the RealSense prior",
+               "none": "no per-pixel prior"}
+NOT_COMPARABLE = "†"
+SHOWN_COLUMNS = {"ok": "ok", "C_g_cm": "C_g", "C_s_cm": "C_s", "P_cm": "P", "P_e_cm": "P_e", "off_pct": "off %",
+                 "off_err_cm": "off err", "runtime_ms": "runtime_ms"}
 
 
 def table1(freqs_hz: np.ndarray = MAROON_FREQS_HZ) -> pd.DataFrame:
@@ -59,11 +66,41 @@ def row_label(method: str, freq: str) -> str:
     return f"{METHOD_LABELS[method]}({', '.join(parts)})"
 
 
+def succeeded(rows: pd.DataFrame) -> pd.Series:
+    """Per result row: every metric defined and no `failure` recorded (older files have no failure column)."""
+    ok = rows[METRICS_CM].notna().all(axis=1)
+    if "failure" in rows:
+        ok &= rows["failure"].fillna("").astype(str).str.len() == 0
+    return ok
+
+
+def _weighted_off_error_cm(group: pd.DataFrame) -> float:
+    """Mean distance of all off-object pixels of the group's captures (each capture weighted by its count)."""
+    if "off_px" not in group or group.off_px.fillna(0).sum() == 0:
+        return float("nan")
+    weights = group.off_px.fillna(0)
+    return float((group.off_err_cm.fillna(0) * weights).sum() / weights.sum())
+
+
 def summarise(rows: pd.DataFrame) -> pd.DataFrame:
-    """Mean metrics (cm) and runtime (ms) per method x freq x prior x grid, in the paper's row order."""
-    summary = (rows.groupby(GROUP_COLUMNS, sort=False)
-               .agg(captures=("P_cm", "size"), **{m: (m, "mean") for m in METRICS_CM + ["runtime_ms"]})
-               .reset_index())
+    """One line per method x freq x prior x grid in the paper's order: captures, ok, comparable, mean metrics over
+    the row's successful captures, off-object share and error, runtime (ms, rows timed alone) and its count."""
+    rows = rows.copy()
+    rows["_ok"] = succeeded(rows)
+    rows["_alone"] = rows["timing"].eq("alone") if "timing" in rows else False
+    n_captures = len(rows[CAPTURE_COLUMNS].drop_duplicates())
+    lines = []
+    for keys, group in rows.groupby(GROUP_COLUMNS, sort=False):
+        good = group[group._ok].drop_duplicates(CAPTURE_COLUMNS)
+        alone = group[group._alone]
+        line = dict(zip(GROUP_COLUMNS, keys), captures=n_captures, ok=len(good), comparable=len(good) == n_captures)
+        line.update({m: good[m].mean() if len(good) else float("nan") for m in METRICS_CM})
+        line["off_pct"] = good["off_pct"].mean() if "off_pct" in good and len(good) else float("nan")
+        line["off_err_cm"] = _weighted_off_error_cm(good)
+        line["runtime_ms"] = alone.runtime_ms.mean() if len(alone) else float("nan")
+        line["runtime_rows"] = len(alone)
+        lines.append(line)
+    summary = pd.DataFrame(lines)
     order = summary.method.map(list(METHOD_LABELS).index) * 100 + summary.freq.map(FREQ_ORDER.index)
     summary = summary.iloc[np.argsort(order.to_numpy(), kind="stable")].reset_index(drop=True)
     summary.insert(0, "row", [row_label(m, f) for m, f in zip(summary.method, summary.freq)])
@@ -71,29 +108,56 @@ def summarise(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def best_rows(summary: pd.DataFrame) -> dict[str, int]:
-    """Per metric, the index of the smallest mean among the non-BP_max rows."""
-    candidates = summary[summary.freq != "full"]
+    """Per metric, the index of the smallest mean among the comparable non-BP_max rows."""
+    candidates = summary[(summary.freq != "full") & summary.comparable]
     return {m: int(candidates[m].idxmin()) for m in METRICS_CM if candidates[m].notna().any()}
 
 
+def _methods_sentence(rows: pd.DataFrame) -> str:
+    parts = []
+    for method, group in rows.groupby("method", sort=False):
+        priors = " / ".join(PRIOR_WORDS.get(p, f"prior {p}") for p in group.prior.unique())
+        if method in ("2fsk", "3fsk") and set(group.prior) == {"none"}:
+            priors = "the scalar prior (0.40 m by default)"
+        grids = ", ".join(sorted(group.grid.unique()))
+        computed = (f" (computed on grid {grids})" if grids != "from_capture" else "")
+        parts.append(f"{METHOD_LABELS[method]} with {priors}{computed}")
+    return "; ".join(parts)
+
+
 def caption(name: str, rows: pd.DataFrame) -> str:
-    """What the table shows and on what: captures, distances, grids, units, how best is marked."""
+    """What the table holds, from its rows: methods and priors, captures, grids, counting and metric rules."""
     objects, distances = sorted(rows.object.unique()), sorted(rows.distance.unique())
-    grids = "; ".join(f"{METHOD_LABELS[m]} on grid {', '.join(sorted(g.grid.unique()))}"
-                      for m, g in rows.groupby("method"))
-    return (f"{CAPTIONS[name]} Mean over {len(objects)} captures ({', '.join(objects)}) at "
-            f"{', '.join(map(str, distances))} cm; {grids}. Metrics in centimetres, runtime in ms per frame "
-            f"({', '.join(sorted(rows.device.unique()))}); best per metric in bold, BP_max excluded.")
+    n_captures = len(rows[CAPTURE_COLUMNS].drop_duplicates())
+    faithful = "metrics" in rows and rows["metrics"].eq("faithful").any()
+    metric_rule = ("MAROON's reference metric definitions (metrics.faithful=true): P counts every radar point, "
+                   "off-object ones with their full depth as error" if faithful else
+                   "P and P_e: mean |depth error| over radar points on the object's ground-truth silhouette "
+                   "(P_e: the silhouette eroded by MAROON's kernel in mm), the same region for every method; "
+                   "off %: share of radar points off the silhouette (false positives), off err: their mean "
+                   "distance to the object")
+    devices = ", ".join(sorted(rows.device.astype(str).unique()))
+    return (f"{TITLES.get(name, name)}: {_methods_sentence(rows)}. {n_captures} captures "
+            f"({', '.join(objects)}) at {', '.join(map(str, distances))} cm, every depth map scored on its "
+            f"capture's calibration pixel grid (methods computed on another grid are resampled: bilinear on one "
+            f"surface, else nearest pixel). Means over each row's successful captures (ok); a row marked "
+            f"{NOT_COMPARABLE} failed on some capture, covers fewer captures and is not ranked; all other rows cover "
+            f"the same captures. {metric_rule}. Metrics in cm; runtime in ms per frame ({devices}), only from "
+            f"runs timed alone (n/a otherwise). Best per metric in bold among the comparable rows, BP_max excluded.")
 
 
 def _formatted(summary: pd.DataFrame, bold) -> pd.DataFrame:
-    shown = summary[["row", *METRICS_CM, "runtime_ms"]].copy()
+    """The shown table: labels (marked when not comparable), ok as 'k/N', numbers as text, best in `bold`."""
     best = best_rows(summary)
+    shown = pd.DataFrame({"": [r if c else f"{r} {NOT_COMPARABLE}" for r, c in zip(summary.row, summary.comparable)],
+                          "ok": [f"{k}/{n}" for k, n in zip(summary.ok, summary.captures)]})
     for metric in METRICS_CM:
-        shown[metric] = [bold(f"{v:.2f}") if best.get(metric) == i else f"{v:.2f}"
+        shown[metric] = [("–" if not np.isfinite(v) else bold(f"{v:.2f}") if best.get(metric) == i else f"{v:.2f}")
                          for i, v in summary[metric].items()]
-    shown["runtime_ms"] = [f"{v:.1f}" for v in summary.runtime_ms]
-    return shown.rename(columns={"row": "", **{m: m.removesuffix("_cm") for m in METRICS_CM}})
+    shown["off_pct"] = ["–" if not np.isfinite(v) else f"{v:.1f}" for v in summary.off_pct]
+    shown["off_err_cm"] = ["–" if not np.isfinite(v) else f"{v:.2f}" for v in summary.off_err_cm]
+    shown["runtime_ms"] = ["n/a" if not np.isfinite(v) else f"{v:.1f}" for v in summary.runtime_ms]
+    return shown.rename(columns=SHOWN_COLUMNS)
 
 
 def to_markdown(table: pd.DataFrame) -> str:
@@ -109,10 +173,36 @@ def summary_markdown(summary: pd.DataFrame) -> str:
     return to_markdown(_formatted(summary, lambda s: f"**{s}**"))
 
 
+_LATEX_SPECIALS = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
+                   "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}"}
+_LATEX_SYMBOLS = {"Δ": r"$\Delta$", "†": r"$^\dagger$", "–": "--", "±": r"$\pm$"}
+
+
+def latex_text(text: str) -> str:
+    """Plain text as LaTeX: TeX's special characters escaped, then Δ † – ± as LaTeX symbols (for captions)."""
+    return "".join(_LATEX_SYMBOLS.get(ch, _LATEX_SPECIALS.get(ch, ch)) for ch in str(text))
+
+
+def styler_latex(table: pd.DataFrame, caption_text: str | None = None, keep: set[str] = frozenset()) -> str:
+    """LaTeX (booktabs rules) of a table through pandas' Styler, which escapes every cell and header; columns in
+    `keep` hold LaTeX already. The preamble needs `\\usepackage{booktabs}`."""
+    escape = lambda value: latex_text(value)   # noqa: E731
+    styler = table.style.hide(axis="index")
+    text_columns = [c for c in table.columns if c not in keep and not pd.api.types.is_numeric_dtype(table[c])]
+    styler = styler.format({c: escape for c in text_columns}, precision=2)
+    styler = styler.format_index(escape, axis=1)
+    body = styler.to_latex(caption=None if caption_text is None else latex_text(caption_text), hrules=True,
+                           position="htbp")
+    return "% needs \\usepackage{booktabs}\n" + body
+
+
 def summary_latex(summary: pd.DataFrame, caption_text: str) -> str:
-    shown = _formatted(summary, lambda s: rf"\textbf{{{s}}}")
-    shown[""] = shown[""].str.replace("Δ", r"$\Delta$").str.replace("_max", r"$_{\max}$")
-    return shown.style.hide(axis="index").to_latex(caption=caption_text, hrules=True)
+    shown = _formatted(summary, lambda s: f"\x00{s}\x01")
+    bold_cells = {c for c in shown.columns if c not in ("", "ok")}
+    for column in bold_cells:   # bold after escaping: mark the best values, escape, then wrap them
+        shown[column] = [latex_text(v).replace("\x00", r"\textbf{").replace("\x01", "}") for v in shown[column]]
+    shown[""] = [latex_text(v).replace(r"\_max", r"$_{\max}$") for v in shown[""]]
+    return styler_latex(shown, caption_text, keep=bold_cells | {""})
 
 
 def read_rows(path: Path) -> pd.DataFrame:
@@ -130,7 +220,7 @@ def read_rows(path: Path) -> pd.DataFrame:
 def main() -> int:
     parser = argparse.ArgumentParser(prog="python -m bench.tables", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("table", choices=["table1", *CAPTIONS])
+    parser.add_argument("table", choices=["table1", *TITLES])
     parser.add_argument("--results", type=Path, help="sweep root or results CSV (default: results/<table>/)")
     parser.add_argument("--csv", type=Path, help="also write the table as CSV")
     parser.add_argument("--latex", type=Path, help="also write the table as LaTeX")
@@ -141,7 +231,7 @@ def main() -> int:
         if args.csv:
             table.to_csv(args.csv, index=False, float_format="%.4f")
         if args.latex:
-            args.latex.write_text(table.style.hide(axis="index").format(precision=2).to_latex(hrules=True))
+            args.latex.write_text(styler_latex(table, "Table I: frequency configurations"))
         return 0
     rows = read_rows(args.results or RESULTS_DIR / args.table)
     summary, text = summarise(rows), caption(args.table, rows)

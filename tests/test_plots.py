@@ -15,9 +15,12 @@ def test_pareto_front_keeps_exactly_the_non_dominated_points():
 
 
 def test_plots_are_written(tmp_path):
-    summary = pd.DataFrame({"row": ["a", "b"], "method": ["bp", "mm2fsk"], "runtime_ms": [100.0, 1.0],
-                            "P_cm": [0.5, 1.0]})
+    summary = pd.DataFrame({"row": ["a", "b", "c"], "method": ["bp", "mm2fsk", "2fsk"],
+                            "runtime_ms": [100.0, 1.0, 5.0], "P_cm": [0.5, 1.0, 3.0], "comparable": [True, True, False],
+                            "ok": [2, 2, 1], "captures": [2, 2, 2]})
     assert runtime_vs_error(summary, tmp_path / "r.png", "t").stat().st_size > 0
+    untimed = summary.assign(runtime_ms=float("nan"))              # a parallel sweep: no runtime measured alone
+    assert runtime_vs_error(untimed, tmp_path / "u.png", "t").stat().st_size > 0
     depth = np.full((5, 6), 0.30)
     for name in ("a", "b"):
         write_arrays(tmp_path / f"{name}.h5", "01_plate_30_000000",
