@@ -14,6 +14,7 @@ import os
 import socket
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import hydra
@@ -29,7 +30,9 @@ from bench.errors import DatasetError
 from bench.grids import grid_for
 from bench.results import write_depth, write_results
 from bench.store import Store, capture_files, code_version, write_arrays
-from metrics.evaluate import METRIC_COLUMNS, evaluate, ground_truth
+from bench.sweepinfo import sweep_jobs, timing_mode
+from metrics.evaluate import GroundTruth, evaluate, ground_truth, no_ground_truth_scores
+from metrics.resample import resample_depth_m, resample_nearest
 
 log = logging.getLogger("bench")
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
@@ -45,26 +48,32 @@ def _capture_dirs(dataset: DictConfig, root: Path) -> list[Path]:
     return dirs
 
 
-def _ensure_synthetic(dataset: DictConfig, root: Path) -> None:
-    """Generate (or reuse from cache) the synthetic captures the dataset config asks for.
+def synthetic_asked(task_overrides: list[str]) -> bool:
+    """Whether the command line asks for synthetic data: `dataset=synthetic` named, or no `dataset.root` given
+    (the default root of the default dataset, configs/dataset/synthetic.yaml). Elsewhere nothing is generated."""
+    names = [override.lstrip("+~") for override in task_overrides]
+    return "dataset=synthetic" in names or not any(name.startswith("dataset.root=") for name in names)
 
-    Only into an empty or missing folder or one the generator made (it holds its manifest): a folder with other
-    data, e.g. the real dataset given as `dataset.root`, is never written.
+
+def _ensure_synthetic(dataset: DictConfig, root: Path) -> None:
+    """Generate (or reuse from cache) the synthetic captures the dataset config asks for (bench.synth).
+
+    Only into a missing or empty folder or one the generator made (it holds its manifest), under the root's lock
+    (parallel jobs wait for the first one): a folder with other data, e.g. the real dataset given as
+    `dataset.root`, is never written.
     """
     if dataset.generate is None:
         return
     from bench.synth import SynthConfig, generate_catalogue
-    from bench.synth.generate import MANIFEST_NAME
-
-    if root.exists() and not root.is_dir():
-        raise DatasetError(root, "dataset root is not a directory")
-    if root.is_dir() and any(root.iterdir()) and not (root / MANIFEST_NAME).is_file():
-        log.info("%s holds data the generator did not write: reading it as it is, generating nothing", root)
-        return
+    from bench.synth.ownership import ForeignRootError
 
     objects = None if dataset.generate.objects is None else list(dataset.generate.objects)
-    generate_catalogue(root, distances=list(dataset.generate.distances), objects=objects, config=SynthConfig(),
-                       log=lambda r: log.info("synthetic %s: %s (%.1f s)", r.path, r.status, r.seconds))
+    try:
+        generate_catalogue(root, distances=list(dataset.generate.distances), objects=objects, config=SynthConfig(),
+                           log=lambda r: log.info("synthetic %s: %s (%.1f s)", r.path, r.status, r.seconds),
+                           on_wait=lambda: log.info("waiting for another process generating captures in %s", root))
+    except ForeignRootError:
+        log.info("%s holds data the generator did not write: reading it as it is, generating nothing", root)
 
 
 def _parts(prior: str) -> tuple[str, ...]:
@@ -100,36 +109,60 @@ def _cell(cfg: DictConfig, device: str) -> dict:
             "device": device, "code": code_version()}
 
 
-def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str) -> tuple[dict, dict]:
-    """Reconstruct and evaluate one capture: (row without identification columns, arrays)."""
+@functools.lru_cache(maxsize=16)   # one ray cast, silhouette and KD-tree per capture for every cell of a worker
+def _ground_truth(capture_dir: Path, frame: int, empty_filtered: bool,
+                  antenna_files: tuple[str | None, str | None]) -> GroundTruth:
+    """The capture's ground truth on its metric grid (the frame's calibration grid), whatever the cell's prior."""
+    capture = _read_capture(capture_dir, frame, ("radar", "mesh"), empty_filtered, antenna_files)
+    return ground_truth(capture, capture.radar.grid)
+
+
+def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str, gt: GroundTruth | None
+             ) -> tuple[dict, dict]:
+    """Reconstruct on `grid`, then evaluate on the capture's metric grid (the ground truth's; the depth map is
+    resampled there when the method computed on another grid): (row without identification columns, arrays on
+    the metric grid)."""
     import methods
 
     targets_ghz = None if cfg.freq.f_ghz is None else [float(f) for f in cfg.freq.f_ghz]
     rec = methods.reconstruct(capture, method=cfg.method.name, freq=targets_ghz, prior=cfg.prior.name,
                               scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid,
                               threshold_db=float(cfg.threshold_db), **OmegaConf.to_container(cfg.method.params))
-    if capture.mesh is not None:
-        gt = ground_truth(capture, rec.grid)
-        scores, gt_depth_m = evaluate(rec.depth_m, gt, faithful=bool(cfg.metrics.faithful)), gt.depth_m
+    metric_grid = capture.radar.grid
+    depth_m = resample_depth_m(rec.depth_m, rec.grid, metric_grid)
+    if gt is not None:
+        scores, gt_depth_m = evaluate(depth_m, gt, faithful=bool(cfg.metrics.faithful)), gt.depth_m
     else:
-        scores, gt_depth_m = dict.fromkeys(METRIC_COLUMNS, float("nan")), rec.depth_m * float("nan")
+        scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
         log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
     row = {"f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
-           "runtime_ms": rec.timings_ms["total"], "device": rec.extra.get("device", device), **scores}
+           "runtime_ms": rec.timings_ms["total"], "device": rec.extra.get("device", device),
+           "compute_grid_size": "x".join(map(str, rec.grid.size)), **scores}
     row.update({f"t_{stage}_ms": ms for stage, ms in rec.timings_ms.items() if stage != "total"})
-    return row, {"depth_m": rec.depth_m, "magnitude": rec.magnitude, "gt_depth_m": gt_depth_m}
+    arrays = {"depth_m": depth_m, "magnitude": resample_nearest(rec.magnitude, rec.grid, metric_grid),
+              "gt_depth_m": gt_depth_m}
+    return row, arrays
 
 
 def _grid_attrs(grid: RadarGrid) -> dict:
     return {"bb_min_m": list(grid.bb_min_m), "bb_max_m": list(grid.bb_max_m), "grid_size": list(grid.size)}
 
 
-def run(cfg: DictConfig, out_dir: Path) -> list[dict]:
-    """Evaluate every capture of the configured dataset; returns the result rows (also written to disk)."""
+def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str = "alone") -> list[dict]:
+    """Evaluate every capture of the configured dataset; returns the result rows (also written to disk).
+
+    `generate`: first generate missing synthetic captures (the dataset config's `generate` settings; the command
+    line sets it only where the user asked for synthetic data, see `synthetic_asked`). `timing` ('alone' or
+    'parallel', see `timing_mode`) goes into every computed row; with 'alone' a stored row whose runtime was not
+    measured alone is recomputed, so a contended runtime never passes for a clean one.
+    """
     from methods.correlate import resolve_device
 
     root = Path(to_absolute_path(str(cfg.dataset.root)))
-    _ensure_synthetic(cfg.dataset, root)
+    if generate:
+        _ensure_synthetic(cfg.dataset, root)
+    if not root.exists():
+        raise DatasetError(root, "dataset root does not exist")
     store = None if cfg.store.dir is None else Store(to_absolute_path(str(cfg.store.dir)))
     device = resolve_device(cfg.device)
     cell = _cell(cfg, device)
@@ -144,13 +177,18 @@ def run(cfg: DictConfig, out_dir: Path) -> list[dict]:
                                                                                 if f is not None]
             key = store.key({**cell, "capture": store.capture_digest(files)})
             hit = store.get(key)
+            if hit is not None and timing == "alone" and hit[0].get("timing") != "alone":
+                hit = None           # its runtime was measured beside other jobs (or not recorded): re-measure
         if hit is None:
             capture = _read_capture(capture_dir, frame, parts, empty_filtered, _antenna_files(cfg))
-            grid = grid_for(capture, grid_override)
+            gt = None if capture.mesh is None else _ground_truth(capture_dir, frame, empty_filtered,
+                                                                 _antenna_files(cfg))
+            grid = capture.radar.grid
             row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index,
-                   "method": cfg.method.name, "freq": cfg.freq.name, "prior": cfg.prior.name, "grid": cfg.grid.name}
-            scores, arrays = _compute(cfg, capture, grid, device)
-            row.update(scores, hostname=socket.gethostname(), code_version=cell["code"], key=key)
+                   "method": cfg.method.name, "freq": cfg.freq.name, "prior": cfg.prior.name, "grid": cfg.grid.name,
+                   "metrics": "faithful" if cfg.metrics.faithful else "sound"}
+            scores, arrays = _compute(cfg, capture, grid_for(capture, grid_override), device, gt)
+            row.update(scores, timing=timing, hostname=socket.gethostname(), code_version=cell["code"], key=key)
             if store is not None:
                 store.put(key, row, arrays, _grid_attrs(grid))
         else:
@@ -172,12 +210,28 @@ def _isolate_warp_cache() -> None:
         os.environ["WARP_CACHE_PATH"] = str(Path(tempfile.gettempdir()) / f"bench-warp-{os.getuid()}-{os.getpid()}")
 
 
+def progress_line(cfg: DictConfig, hydra_cfg: DictConfig, rows: list[dict], seconds: float) -> str:
+    """What a finished job prints: `[table3 5/13] bp_d05: 8 captures, 3 computed, 5 cached, 12.3 s` in a multirun
+    (job number of the sweep's jobs), `mm2fsk_d10_realsense: 2 captures, ... -> <run dir>` for a single run."""
+    cell = hydra_cfg.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
+    cached = sum(bool(row["cached"]) for row in rows)
+    text = f"{cell}: {len(rows)} captures, {len(rows) - cached} computed, {cached} cached, {seconds:.1f} s"
+    if hydra_cfg.mode != RunMode.MULTIRUN:
+        return f"{text} -> {hydra_cfg.runtime.output_dir}"
+    experiment = hydra_cfg.runtime.choices.get("experiment") or "sweep"
+    return f"[{experiment} {hydra_cfg.job.num + 1}/{sweep_jobs() or '?'}] {text}"
+
+
 @hydra.main(version_base="1.3", config_path=str(CONFIG_DIR), config_name="config")
 def main(cfg: DictConfig) -> None:
-    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    hydra_cfg = HydraConfig.get()
+    out_dir = Path(hydra_cfg.runtime.output_dir)
     _isolate_warp_cache()
     try:
-        run(cfg, out_dir)
+        started = time.perf_counter()
+        rows = run(cfg, out_dir, generate=synthetic_asked(list(hydra_cfg.overrides.task)),
+                   timing=timing_mode(hydra_cfg))
+        print(progress_line(cfg, hydra_cfg, rows, time.perf_counter() - started), flush=True)
     except DatasetError as err:
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)

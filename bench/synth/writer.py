@@ -38,11 +38,20 @@ def radar_grid(distance_m: float) -> RadarGrid:
     return RadarGrid(bb_min, bb_max, RADAR_GRID_SIZE)
 
 
+def maroon_default_mask_bb(distance_m: float) -> dict[str, float]:
+    """What MAROON's viewer writes into metadata.json (MAROON_FORMAT.md 1.2): zmax 0.70 m, zmin 0.26 m at 30 cm.
+
+    Not tighter: a result that wraps to an alias behind the object must stay inside the box and be scored as
+    wrong, not removed before it is measured.
+    """
+    return {"zmin": 0.26, "zmax": 0.7} if distance_m == 0.3 else {"zmax": 0.7}
+
+
 def write_metadata(capture_dir: Path, distance_m: float, label: str) -> None:
     _write_json(capture_dir / "metadata.json", {
         "calibration": "01_registration_coarse", "calibration_fine": "01_registration_fine",
         "distance_meters": distance_m, "mask_erosion": 20, "labels": [label],
-        "mask_bb": {"zmin": round(distance_m - 0.12, 6), "zmax": round(distance_m + 0.15, 6)},
+        "mask_bb": maroon_default_mask_bb(distance_m),
         "empty_measurement": "01_empty"})
 
 
