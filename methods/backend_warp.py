@@ -17,7 +17,11 @@ common phase 2 k |p| in float64, reduced mod 2 pi.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
+import os
+import sys
+import tempfile
 
 import numpy as np
 import warp as wp
@@ -32,10 +36,37 @@ vec_chunk = wp.types.vector(length=32, dtype=wp.float32)
 wp.set_module_options({"max_unroll": 32})
 
 
+NO_DRIVER_NOTICE = "Could not find or load the NVIDIA CUDA driver"
+
+
 @functools.cache
 def _init() -> None:
+    """wp.init() once. Warp's native code prints a warning on stderr where there is no CUDA driver; on a CPU-only
+    machine that is expected (callers ask `cuda_available()` and say so in one line), so that warning is dropped
+    and anything else the native code prints is passed on."""
     wp.config.log_level = wp.LOG_WARNING
-    wp.init()
+    with _native_stderr() as captured:
+        wp.init()
+    lines = [line for line in captured() if NO_DRIVER_NOTICE not in line]
+    if lines:
+        sys.stderr.write("".join(f"{line}\n" for line in lines))
+
+
+@contextlib.contextmanager
+def _native_stderr():
+    """Capture what native code writes to file descriptor 2 (a temp file); yields a function giving its lines."""
+    lines: list[str] = []
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield lambda: lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            lines.extend(tmp.read().decode(errors="replace").splitlines())
 
 
 def cuda_available() -> bool:

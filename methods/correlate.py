@@ -35,10 +35,21 @@ def correlate_reference(signal: np.ndarray, freqs_hz: np.ndarray, tx_m: np.ndarr
 DEVICES = ("cpu", "cuda", "auto", "warp-cpu")
 
 
+class DeviceUnavailableError(RuntimeError):
+    """A device was asked for that this machine cannot run (e.g. "cuda" where Warp sees no GPU).
+
+    Command lines turn it into one line naming their own option (bench.cli.resolve_device)."""
+
+    def __init__(self, device: str, problem: str):
+        self.device, self.problem = device, problem
+        super().__init__(f"device={device!r} was asked for, but {problem}")
+
+
 def resolve_device(device: str) -> str:
     """Map a requested device to the one used: "cpu" (numpy + BLAS), "cuda" (Warp), "warp-cpu" (Warp on the CPU).
 
-    "auto" gives "cuda" when Warp sees a CUDA device, else "cpu". "cuda" without a CUDA device raises RuntimeError.
+    "auto" gives "cuda" when Warp sees a CUDA device, else "cpu". "cuda" without a CUDA device raises
+    DeviceUnavailableError (a RuntimeError); an unknown name raises ValueError.
     """
     if device not in DEVICES:
         raise ValueError(f"device must be one of {DEVICES}, got {device!r}")
@@ -49,7 +60,7 @@ def resolve_device(device: str) -> str:
     if device == "auto":
         return "cuda" if has_cuda else "cpu"
     if not has_cuda:
-        raise RuntimeError("device='cuda' was asked for, but Warp sees no CUDA device")
+        raise DeviceUnavailableError(device, "Warp sees no CUDA device")
     return "cuda"
 
 
