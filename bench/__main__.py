@@ -1,4 +1,42 @@
-"""`python -m bench ...`: the Hydra app (see bench/app.py)."""
-from bench.app import main
+"""`python -m bench ...`: the Hydra app (see bench/app.py).
 
-main()
+Before Hydra starts, its command line is checked with Hydra's own parser made one-line (an unknown flag, or two
+of -m/--cfg/--info/--run/--shell-completion, which Hydra reports with a usage dump or a traceback), and an
+explicit `hydra.run.dir=` (with -m: `hydra.sweep.dir=`) that cannot be created ends in one line (Hydra would print
+a traceback). A closed stdout or Ctrl-C end quietly (bench.cli). Hydra's own messages for config mistakes (an
+unknown option of a group, with the list of options) are left as Hydra words them.
+"""
+import sys
+
+from bench import cli
+
+PROG = "python -m bench"
+
+
+def check_command_line(argv: list[str]) -> None:
+    """UserError (or a one-line argparse error) for what Hydra would refuse with a usage dump or a traceback."""
+    from hydra._internal.utils import get_args_parser
+
+    parser = get_args_parser()
+    parser.prog = PROG
+    parser.error = lambda message: cli.fail(f"{message} (see {PROG} --help)")   # one line, as cli.ArgumentParser
+    args = parser.parse_args(argv)
+    modes = [flag for flag, on in (("--run", args.run), ("--multirun", args.multirun), ("--cfg", args.cfg),
+                                   ("--info", args.info is not None), ("--shell-completion", args.shell_completion))
+             if on]
+    if len(modes) > 1:
+        raise cli.UserError(PROG, f"{' and '.join(modes)} cannot be combined (use one of them)")
+    key = "hydra.sweep.dir=" if args.multirun else "hydra.run.dir="
+    for override in args.overrides:
+        if override.startswith(key) and "${" not in override:
+            cli.check_creatable_dir(override[len(key):], override)
+
+
+def _main() -> None:
+    check_command_line(sys.argv[1:])
+    from bench.app import main
+
+    main()
+
+
+cli.run_guarded(_main)

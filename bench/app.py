@@ -23,7 +23,7 @@ from hydra.types import RunMode
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
-from bench import maroon
+from bench import cli, maroon
 from bench.antennas import load_antenna_array
 from bench.capture import Capture, RadarGrid
 from bench.errors import DatasetError
@@ -228,16 +228,17 @@ def main(cfg: DictConfig) -> None:
     out_dir = Path(hydra_cfg.runtime.output_dir)
     _isolate_warp_cache()
     try:
+        cli.resolve_device(str(cfg.device), option="device=")   # before generating or reading anything
         started = time.perf_counter()
         rows = run(cfg, out_dir, generate=synthetic_asked(list(hydra_cfg.overrides.task)),
                    timing=timing_mode(hydra_cfg))
         print(progress_line(cfg, hydra_cfg, rows, time.perf_counter() - started), flush=True)
-    except DatasetError as err:
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
     except MissingMandatoryValue as err:
-        print(f"error: the setting '{err.full_key}' is required (e.g. {err.full_key}=/path/to/maroon)", file=sys.stderr)
-        sys.exit(2)
+        cli.fail(f"the setting '{err.full_key}' is required (e.g. {err.full_key}=/path/to/maroon)")
     except ValueError as err:  # invalid combination of method, frequencies and prior
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
+        cli.fail(str(err))
+    except Exception as err:   # noqa: BLE001 -- dataset, path, device and file errors in one line; bugs re-raised
+        message = cli.error_line(err)
+        if message is None:
+            raise
+        cli.fail(message)

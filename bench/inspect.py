@@ -1,7 +1,6 @@
 """`python -m bench.inspect DIR`: what each capture holds and what is missing or wrong. Exit 1 on any problem."""
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +8,7 @@ import numpy as np
 from bench import maroon
 from bench.alignment import apply_transform
 from bench.capture import Capture
-from bench.cli import run_guarded
+from bench.cli import ArgumentParser, run_guarded
 from bench.errors import DatasetError
 
 
@@ -88,7 +87,7 @@ def inspect_capture(capture_dir: Path) -> tuple[list[str], list[str]]:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.inspect", description=__doc__)
+    parser = ArgumentParser(prog="python -m bench.inspect", description=__doc__)
     parser.add_argument("root", type=Path, help="dataset root (holding <object>/<distance>/) or one capture folder")
     args = parser.parse_args()
     root = args.root

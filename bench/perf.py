@@ -10,21 +10,22 @@ the API call (uploads and the copy back included; the frame's inputs are cached 
 repeated calls on one frame upload only the points) and kernel_ms the device time alone (inputs resident, output
 left on the device), which is what the speedup over the plain kernel compares; the CUDA points and BP cases run
 the tensor-core kernel ("tc"), and separable_kernel_ms times the fp32 separable kernel beside it. Accuracy is the relative
-error against the float64 reference on 64 random points of the case. Writes results/perf_<device>.csv, then
-the whole-frame timings of every method (bench.perf_frames) to results/perf_frames_<device>.csv.
+error against the float64 reference on 64 random points of the case. Writes OUT/perf_<device>.csv, then the
+whole-frame timings of every method (bench.perf_frames) to OUT/perf_frames_<device>.csv; OUT is `--out`, by
+default outputs/perf/ (`--out results` refreshes the committed figures).
 """
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 from pathlib import Path
 
 import numpy as np
 
+from bench import cli
 from bench.antennas import load_antenna_array
 from bench.perf_frames import run_frames, write_rows
-from methods.correlate import C_M_PER_S, correlate, correlate_reference, correlate_volume, resolve_device
+from methods.correlate import C_M_PER_S, correlate, correlate_reference, correlate_volume
 
 ALL_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 SIZES = {"paper": (301, 201), "small": (61, 21)}
@@ -163,22 +164,29 @@ def direct_of_volume(device, signal, freqs_hz, ant, x_m, y_m, z_m, repeat) -> di
     return {"direct_impl": f"numpy plain, {len(subset)} points extrapolated", "direct_ms": ms * n_points / len(subset)}
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+DEFAULT_OUT = Path("outputs/perf")
+
+
+def main(argv=None) -> int:
+    parser = cli.ArgumentParser(prog="python -m bench.perf", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto"])
     parser.add_argument("--sizes", default="paper", choices=sorted(SIZES))
-    parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--cpu-z", type=int, default=2, help="z-planes run for CPU volume cases (scaled to all)")
-    parser.add_argument("--out", default="results")
+    parser.add_argument("--repeat", type=cli.positive_int, default=5)
+    parser.add_argument("--cpu-z", type=cli.positive_int, default=2,
+                        help="z-planes run for CPU volume cases (scaled to all)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help="folder for the CSVs (default: outputs/perf; `--out results` for the committed figures)")
     parser.add_argument("--no-frames", action="store_true", help="skip the whole-frame timings (bench.perf_frames)")
     args = parser.parse_args(argv)
-    device = resolve_device(args.device)
+    device = cli.resolve_device(args.device)
+    out = cli.output_dir(args.out)
     rows = run_cases(device, args.sizes, args.repeat, args.cpu_z)
-    write_rows(rows, Path(args.out) / f"perf_{device}.csv", columns=CSV_COLUMNS, digits=6)
+    write_rows(rows, out / f"perf_{device}.csv", columns=CSV_COLUMNS, digits=6)
     if not args.no_frames:
         bp_nz = 201 if device == "cuda" else args.cpu_z
-        write_rows(run_frames(device, args.repeat, bp_nz), Path(args.out) / f"perf_frames_{device}.csv")
+        write_rows(run_frames(device, args.repeat, bp_nz), out / f"perf_frames_{device}.csv")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    cli.run_guarded(main)

@@ -5,21 +5,21 @@ built in memory (no file I/O, no Open3D): a tilted plate 0.30-0.34 m seen by a 6
 pixel is valid, so MM-2FSK's prior covers all 301x301 radar pixels (the worst case of the CPU target <= 0.3 s).
 BP runs on 301x301 pixels with `--bp-nz` depth samples (201 = the paper's grid; fewer on the CPU, scaled).
 Medians of `--repeat` warm runs, with the per-stage times the methods report. Writes
-results/perf_frames_<device>.csv.
+OUT/perf_frames_<device>.csv, OUT being `--out` (default outputs/perf/; `--out results` for the committed figures).
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import statistics
 from pathlib import Path
 
 import numpy as np
 
+from bench import cli
 from bench.antennas import load_antenna_array
 from bench.capture import CameraIntrinsics, Capture, DepthFrame, Metadata, RadarFrame, RadarGrid
 from methods import reconstruct
-from methods.correlate import C_M_PER_S, resolve_device
+from methods.correlate import C_M_PER_S
 
 FREQS_HZ = np.linspace(72e9, 82e9, 128)
 CASES = (("mm2fsk", "d10", "realsense"), ("2fsk", "d05", "none"), ("3fsk", "d05_d10", "none"),
@@ -108,17 +108,21 @@ def write_rows(rows: list[dict], path: Path, columns: list[str] | None = None, d
     print(f"wrote {path}")
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None) -> int:
+    parser = cli.ArgumentParser(prog="python -m bench.perf_frames", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto"])
-    parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--bp-nz", type=int, default=None, help="BP depth samples run (default: 201 on CUDA, 2 on CPU)")
-    parser.add_argument("--out", default="results")
+    parser.add_argument("--repeat", type=cli.positive_int, default=5)
+    parser.add_argument("--bp-nz", type=cli.positive_int, default=None,
+                        help="BP depth samples run (default: 201 on CUDA, 2 on CPU)")
+    parser.add_argument("--out", type=Path, default=Path("outputs/perf"),
+                        help="folder for the CSV (default: outputs/perf; `--out results` for the committed figures)")
     args = parser.parse_args(argv)
-    device = resolve_device(args.device)
+    device = cli.resolve_device(args.device)
+    out = cli.output_dir(args.out)
     bp_nz = args.bp_nz or (201 if device == "cuda" else 2)
-    write_rows(run_frames(device, args.repeat, bp_nz), Path(args.out) / f"perf_frames_{device}.csv")
+    write_rows(run_frames(device, args.repeat, bp_nz), out / f"perf_frames_{device}.csv")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    cli.run_guarded(main)

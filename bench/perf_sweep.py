@@ -10,11 +10,11 @@ each frame's time is the median of `--repeat` wall-clock calls (ms, the whole `r
 Shared stage: the MM-2FSK cells of one capture use the same RealSense prior; the `mm2fsk shared` row builds it
 once per capture (`methods.api.prior_image_m`) and runs the three cells on it (`methods.mm2fsk.reconstruct_mm2fsk`),
 timed as one frame group, and checks that the depth maps equal those of `reconstruct`.
-Writes results/perf_sweep_<device>.csv: one row per cell, the shared MM-2FSK group, and the table3 totals.
+Writes OUT/perf_sweep_<device>.csv (OUT = `--out`, default outputs/perf/; `--out results` for the committed
+figures): one row per cell, the shared MM-2FSK group, and the table3 totals.
 """
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 from pathlib import Path
@@ -22,13 +22,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from bench import cli
 from bench.capture import Capture, RadarGrid
 from bench.grids import grid_for
 from bench.maroon import discover_captures, read_capture
 from bench.perf_frames import write_rows
 from methods import reconstruct
 from methods.api import frequency_indices, prior_image_m
-from methods.correlate import resolve_device
 from methods.mm2fsk import reconstruct_mm2fsk
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
@@ -143,20 +143,24 @@ def _total(name: str, rows: list[dict], device: str) -> dict:
             "fps": 1e3 * frames / total_ms}
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--root", required=True, help="dataset root holding object/distance capture folders")
+def main(argv=None) -> int:
+    parser = cli.ArgumentParser(prog="python -m bench.perf_sweep", description=__doc__.splitlines()[0])
+    parser.add_argument("--root", type=Path, required=True, help="dataset root holding <object>/<distance> folders")
     parser.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto"])
-    parser.add_argument("--repeat", type=int, default=3, help="timed calls per cell and capture (median)")
+    parser.add_argument("--repeat", type=cli.positive_int, default=3, help="timed calls per cell and capture (median)")
     parser.add_argument("--bp-grid", default="capture", choices=["capture", "small"],
                         help="BP grid: the capture's own (paper, 301x301x201) or configs/grid/bp_cpu.yaml")
-    parser.add_argument("--out", default="results")
+    parser.add_argument("--out", type=Path, default=Path("outputs/perf"),
+                        help="folder for the CSV (default: outputs/perf; `--out results` for the committed figures)")
     args = parser.parse_args(argv)
-    device = resolve_device(args.device)
+    root = cli.existing_path(args.root, "dir", "dataset root")
+    device = cli.resolve_device(args.device)
+    out = cli.output_dir(args.out)
     bp_override = _yaml(CONFIGS / "grid" / "bp_cpu.yaml")["override"] if args.bp_grid == "small" else None
-    rows = run_sweep(Path(args.root), device, args.repeat, bp_override)
-    write_rows(rows, Path(args.out) / f"perf_sweep_{device}.csv")
+    rows = run_sweep(root, device, args.repeat, bp_override)
+    write_rows(rows, out / f"perf_sweep_{device}.csv")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    cli.run_guarded(main)

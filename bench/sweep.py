@@ -6,14 +6,13 @@ Sweep root after `python -m bench -m experiment=table3`: `results.csv` (every jo
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import pandas as pd
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-from bench import plots, tables
+from bench import cli, plots, tables
 from bench.results import write_results
 
 
@@ -55,13 +54,13 @@ class MergeResults(Callback):
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.sweep", description=__doc__)
-    parser.add_argument("root", type=Path)
+    parser = cli.ArgumentParser(prog="python -m bench.sweep", description=__doc__)
+    parser.add_argument("root", type=Path, help="sweep root (holding <job>/results.csv)")
     parser.add_argument("--table", choices=sorted(tables.TITLES))
     args = parser.parse_args()
-    print(tables.summary_markdown(report(args.root, args.table)))
+    print(tables.summary_markdown(report(cli.existing_path(args.root, "dir", "sweep root"), args.table)))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    cli.run_guarded(main)

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench import cli
 from methods.frequencies import CONFIGS_GHZ, max_unambiguous_depth_m, select_frequencies
 
 MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
@@ -217,31 +218,54 @@ def read_rows(path: Path) -> pd.DataFrame:
     return pd.concat([pd.read_csv(p) for p in parts], ignore_index=True)
 
 
+RESULT_KEYS = ("object", "distance", "frame", "method", "freq", "prior", "grid", "device", "runtime_ms")
+
+
+def load_rows(table: str, given: Path | None) -> pd.DataFrame:
+    """The rows of `--results` (default: the committed `results/<table>/`), or a one-line UserError when the path
+    is missing or holds no results CSV."""
+    if given is None and not (RESULTS_DIR / table).exists():
+        raise cli.UserError(RESULTS_DIR / table, f"no committed results for {table}: run `python -m bench -m "
+                            f"experiment={table}` and pass its sweep root with --results DIR")
+    path = cli.existing_path(given or RESULTS_DIR / table, "any", "results path")
+    try:
+        rows = read_rows(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise cli.UserError(path, f"not a results CSV ({' '.join(str(err).split())})") from None
+    missing = [c for c in (*RESULT_KEYS, *METRICS_CM) if c not in rows]
+    if missing:
+        raise cli.UserError(path, f"not a results CSV: no column {', '.join(missing)}")
+    if rows.empty:
+        raise cli.UserError(path, "holds no result rows")
+    return rows
+
+
 def main() -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.tables", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = cli.ArgumentParser(prog="python -m bench.tables", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("table", choices=["table1", *TITLES])
     parser.add_argument("--results", type=Path, help="sweep root or results CSV (default: results/<table>/)")
     parser.add_argument("--csv", type=Path, help="also write the table as CSV")
     parser.add_argument("--latex", type=Path, help="also write the table as LaTeX")
     args = parser.parse_args()
+    csv_file, latex_file = (None if f is None else cli.output_file(f) for f in (args.csv, args.latex))
     if args.table == "table1":
         table = table1()
         print(to_markdown(table))
-        if args.csv:
-            table.to_csv(args.csv, index=False, float_format="%.4f")
-        if args.latex:
-            args.latex.write_text(styler_latex(table, "Table I: frequency configurations"))
+        if csv_file:
+            table.to_csv(csv_file, index=False, float_format="%.4f")
+        if latex_file:
+            latex_file.write_text(styler_latex(table, "Table I: frequency configurations"))
         return 0
-    rows = read_rows(args.results or RESULTS_DIR / args.table)
+    rows = load_rows(args.table, args.results)
     summary, text = summarise(rows), caption(args.table, rows)
     print(f"{text}\n\n{summary_markdown(summary)}")
-    if args.csv:
-        summary.to_csv(args.csv, index=False, float_format="%.4f")
-    if args.latex:
-        args.latex.write_text(summary_latex(summary, text))
+    if csv_file:
+        summary.to_csv(csv_file, index=False, float_format="%.4f")
+    if latex_file:
+        latex_file.write_text(summary_latex(summary, text))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    cli.run_guarded(main)

@@ -1,5 +1,7 @@
-"""`python -m bench.stress [--quick] [--out results/stress]`: run every stress experiment, write CSVs, PNGs
-and summary.md into OUT. The full report takes about two minutes on two cores; `--quick` (for tests) seconds."""
+"""`python -m bench.stress [--quick] [--out DIR]`: run every stress experiment, write CSVs, PNGs and summary.md into
+OUT (default outputs/stress/; `--out results/stress` refreshes the committed report). The full report takes about
+two minutes on two cores; `--quick` (for tests) seconds. `--precision-only` writes only OUT/precision.csv (e.g. on
+a GPU machine); `--add-precision CSV` merges such rows into the report already in OUT."""
 from __future__ import annotations
 
 import argparse
@@ -10,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench import cli
 from bench.stress import precision   # the other experiments import Open3D (via the generator): imported in run()
 
 FULL = {"distances_m": (0.2, 0.3, 0.4, 0.5, 0.6), "grid_sizes": (11, 61, 151), "n_ref": 48,
@@ -72,12 +75,26 @@ def _report(out: Path, results: dict[str, list[dict]], seconds: dict[str, float]
     write_summary(results, seconds, quick, out / "summary.md")
 
 
+REPORT_TABLES = ("precision", "wrapping", "wrapping_boundaries", "noise", "prior_degradation", "prior_breaks",
+                 "hostile", "timings")
+
+
 def add_precision_rows(out: Path, extra_csv: Path) -> None:
     """Merge precision rows measured on another machine (e.g. `--precision-only` on a GPU) into the full report
-    in `out`, replacing rows of the same devices, and rewrite its plots and summary."""
-    names = ("precision", "wrapping", "wrapping_boundaries", "noise", "prior_degradation", "prior_breaks", "hostile")
-    results = {name: pd.read_csv(out / f"{name}.csv").to_dict("records") for name in names}
-    extra = pd.read_csv(extra_csv)
+    in `out`, replacing rows of the same devices, and rewrite its plots and summary. A missing report or a CSV
+    without precision rows is a UserError (one line, before anything is written)."""
+    missing = [f"{name}.csv" for name in REPORT_TABLES if not (out / f"{name}.csv").is_file()]
+    if missing:
+        raise cli.UserError(out, f"no stress report to merge into (missing {', '.join(missing)}); write one with "
+                                 f"`python -m bench.stress --out {out}` first")
+    results = {name: pd.read_csv(out / f"{name}.csv").to_dict("records") for name in REPORT_TABLES[:-1]}
+    try:
+        extra = pd.read_csv(extra_csv)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise cli.UserError(extra_csv, f"not a precision CSV ({' '.join(str(err).split())})") from None
+    absent = [c for c in pd.DataFrame(results["precision"]).columns if c not in extra]
+    if absent:
+        raise cli.UserError(extra_csv, f"not a precision CSV: no column {', '.join(absent)}")
     kept = pd.DataFrame(results["precision"])
     kept = kept[~kept.device.isin(extra.device.unique())]
     merged = pd.concat([kept, extra], ignore_index=True)
@@ -87,31 +104,39 @@ def add_precision_rows(out: Path, extra_csv: Path) -> None:
     _report(out, results, dict(zip(timings.experiment, timings.seconds)), quick=False)
 
 
+DEFAULT_OUT = Path("outputs/stress")
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.stress", description=__doc__)
-    parser.add_argument("--out", type=Path, default=Path("results/stress"), help="output folder")
+    parser = cli.ArgumentParser(prog="python -m bench.stress", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help="report folder (default: outputs/stress; `--out results/stress` for the committed one)")
     parser.add_argument("--quick", action="store_true", help="small sweeps (seconds), for tests")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--precision-only", action="store_true",
-                        help="only the precision sweep on every device Warp sees (e.g. on a GPU machine without "
-                             "Open3D); writes OUT/precision.csv")
-    parser.add_argument("--add-precision", type=Path, metavar="CSV",
-                        help="merge precision rows from another machine into the report in OUT")
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument("--precision-only", action="store_true",
+                      help="only the precision sweep on every device Warp sees (e.g. on a GPU machine without "
+                           "Open3D); writes OUT/precision.csv")
+    mode.add_argument("--add-precision", type=Path, metavar="CSV",
+                      help="merge precision rows from another machine into the report in OUT")
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    if args.precision_only:
-        size = QUICK if args.quick else FULL
-        rows = precision.precision_rows(size["distances_m"], size["grid_sizes"], precision.available_devices(),
-                                        size["n_ref"], args.seed)
-        args.out.mkdir(parents=True, exist_ok=True)
-        pd.DataFrame(rows).to_csv(args.out / "precision.csv", index=False, float_format="%.6g")
-    elif args.add_precision:
-        add_precision_rows(args.out, args.add_precision)
+    if args.add_precision:
+        add_precision_rows(cli.existing_path(args.out, "dir", "stress report folder"),
+                           cli.existing_path(args.add_precision, "file", "precision CSV"))
     else:
-        run(args.out, args.quick, args.seed)
+        out = cli.output_dir(args.out)
+        if args.precision_only:
+            size = QUICK if args.quick else FULL
+            rows = precision.precision_rows(size["distances_m"], size["grid_sizes"], precision.available_devices(),
+                                            size["n_ref"], args.seed)
+            pd.DataFrame(rows).to_csv(out / "precision.csv", index=False, float_format="%.6g")
+        else:
+            run(out, args.quick, args.seed)
     print(f"stress report written to {args.out} in {time.perf_counter() - start:.0f} s")
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    cli.run_guarded(main)

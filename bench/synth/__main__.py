@@ -1,30 +1,24 @@
 """Command line: `python -m bench.synth --out DIR [--distances 30 40 50] [--objects ...] [--frames N]
-[--snr-db X] [--seed S] [--no-clutter] [--force]`. Prints one line per capture; bad arguments give a one-line
-error and exit code 2."""
+[--snr-db X] [--seed S] [--no-clutter] [--force]`. Prints one line per capture; bad arguments or an output folder
+that cannot be written give a one-line error and exit code 2 (bench.cli)."""
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 import time
 
+from bench import cli
 from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig
 from bench.synth.generate import DEFAULT_DISTANCES_CM, CaptureResult, generate_catalogue
 from bench.synth.scenes import CATALOGUE
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, no usage dump
-        sys.stderr.write(f"bench.synth: error: {message}\n")
-        sys.exit(2)
-
-
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="python -m bench.synth", description="Generate synthetic MAROON-format captures.")
+    p = cli.ArgumentParser(prog="python -m bench.synth", description="Generate synthetic MAROON-format captures.")
     p.add_argument("--out", required=True, help="dataset root directory")
     p.add_argument("--distances", type=int, nargs="+", default=list(DEFAULT_DISTANCES_CM), help="centimetres")
     p.add_argument("--objects", nargs="+", default=None, help=f"subset of: {' '.join(CATALOGUE)}")
-    p.add_argument("--frames", type=int, default=SynthConfig.frames)
+    p.add_argument("--frames", type=cli.positive_int, default=SynthConfig.frames)
     p.add_argument("--snr-db", type=float, default=SynthConfig.snr_db)
     p.add_argument("--seed", type=int, default=SynthConfig.seed)
     p.add_argument("--no-clutter", action="store_true", help="raw frames without empty-room clutter")
@@ -56,8 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         results = generate_catalogue(args.out, args.distances, args.objects, config, args.force, log)
     except OSError as err:
-        sys.stderr.write(f"bench.synth: error: cannot write under {args.out}: {err.strerror or err}\n")
-        return 1
+        raise cli.UserError(args.out, f"cannot write the dataset there ({err.strerror or err})") from None
     generated = sum(r.status == "generated" for r in results)
     print(f"{len(results)} captures ({generated} generated, {len(results) - generated} cached) "
           f"in {time.perf_counter() - start:.1f} s")
@@ -65,4 +58,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    cli.run_guarded(main)
