@@ -209,7 +209,8 @@ def test_interrupted_write_leaves_no_capture(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError):
         ensure_capture(tmp_path, "08_two_objects", 30, FAST)
     assert os.listdir(tmp_path / "08_two_objects") == []
-    assert not (tmp_path / "synth_manifest.json").exists()
+    # the root was claimed (manifest first), but the unfinished capture is not recorded
+    assert json.loads((tmp_path / "synth_manifest.json").read_text()) == {"captures": {}}
 
 
 def test_expected_files_exist(tmp_path):

@@ -3,13 +3,15 @@
 Cache: `<root>/synth_manifest.json` maps "object/distance" to the hash of generator version + config. A capture
 whose directory exists and whose hash matches is skipped; any other is rebuilt in a hidden temporary folder beside
 it and moved into place with a rename, so an interrupted run never leaves a half-written capture.
+
+Concurrency (bench.synth.ownership): the generator writes only into a root it owns (manifest created first, a
+root with other data is refused) and under the root's exclusive lock, so parallel jobs asking for the same captures
+generate each capture once; temp folders left by a dead process are removed before a capture is rebuilt.
 """
 from __future__ import annotations
 
-import fcntl
 import json
 import os
-import re
 import shutil
 import time
 import uuid
@@ -20,14 +22,14 @@ from typing import Callable, Iterable
 import numpy as np
 
 from bench.antennas import load_antenna_array
-from bench.synth import depth_camera, writer
+from bench.synth import depth_camera, ownership, writer
 from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
 from bench.synth.meshes import rotation_matrix
 from bench.synth.radar_model import clutter_frame, noise_frame, roughen, simulate_frame, surface_amplitudes
 from bench.synth.sampling import visible_samples
 from bench.synth.scenes import CATALOGUE, build_scene
 
-MANIFEST_NAME = "synth_manifest.json"
+MANIFEST_NAME = ownership.MANIFEST_NAME
 DEFAULT_DISTANCES_CM = (30, 40, 50)
 START_TIME_NS = 1_700_000_000_000_000_000
 FRAME_PERIOD_NS = 33_333_333          # 30 fps RealSense; radar frames stamped at the same instants
@@ -102,11 +104,10 @@ def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config:
 
 
 class _Manifest:
-    """Locked read-modify-write access to `<root>/synth_manifest.json`."""
+    """`<root>/synth_manifest.json`; written only under the root's lock (ownership.exclusive)."""
 
     def __init__(self, root: Path):
         self.path = root / MANIFEST_NAME
-        self.lock_path = root / f".{MANIFEST_NAME}.lock"
 
     def read(self) -> dict:
         try:
@@ -115,44 +116,33 @@ class _Manifest:
             return {}
 
     def record(self, key: str, entry: dict) -> None:
-        with open(self.lock_path, "a") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            captures = self.read()
-            captures[key] = entry
-            tmp = self.path.with_name(f".{MANIFEST_NAME}.{os.getpid()}.tmp")
-            tmp.write_text(json.dumps({"captures": captures}, indent=2, sort_keys=True))
-            os.replace(tmp, self.path)
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+        captures = self.read()
+        captures[key] = entry
+        tmp = self.path.with_name(f".{MANIFEST_NAME}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps({"captures": captures}, indent=2, sort_keys=True))
+        os.replace(tmp, self.path)
 
 
 def _remove_stale_temporaries(object_dir: Path, distance_cm: int) -> None:
     """Delete leftovers of interrupted runs (hidden temp/old folders whose process is gone)."""
-    pattern = re.compile(rf"^\.{distance_cm}\.(tmp|old)-(\d+)-[0-9a-f]+$")
     for entry in object_dir.glob(f".{distance_cm}.*"):
-        match = pattern.match(entry.name)
-        if match and not _pid_alive(int(match.group(2))):
+        match = ownership.TEMP_FOLDER.match(entry.name)
+        if match and not ownership.pid_alive(int(match.group(3))):
             shutil.rmtree(entry, ignore_errors=True)
 
 
-def ensure_capture(root, object_name: str, distance_cm: int, config: SynthConfig = SynthConfig(),
-                   force: bool = False) -> CaptureResult:
-    """Generate one capture unless an up-to-date one (same hash in the manifest) already exists."""
-    start = time.perf_counter()
+def _check(object_name: str, distance_cm: int, config: SynthConfig) -> None:
     config.validate()
     if object_name not in CATALOGUE:
         raise ValueError(f"unknown object {object_name!r}; known: {', '.join(CATALOGUE)}")
     if not DISTANCE_RANGE_CM[0] <= int(distance_cm) <= DISTANCE_RANGE_CM[1]:
         raise ValueError(f"distance {distance_cm} cm is outside {DISTANCE_RANGE_CM[0]}..{DISTANCE_RANGE_CM[1]} cm")
-    root = Path(root)
+
+
+def _ensure_locked(root: Path, object_name: str, distance_cm: int, config: SynthConfig,
+                   force: bool) -> CaptureResult:
+    """ensure_capture's work; the caller has claimed `root` and holds its lock."""
+    start = time.perf_counter()
     target = root / object_name / str(int(distance_cm))
     key, digest = f"{object_name}/{int(distance_cm)}", capture_hash(config, object_name, distance_cm)
     manifest = _Manifest(root)
@@ -178,6 +168,19 @@ def ensure_capture(root, object_name: str, distance_cm: int, config: SynthConfig
     return CaptureResult(target, "generated", seconds)
 
 
+def ensure_capture(root, object_name: str, distance_cm: int, config: SynthConfig = SynthConfig(),
+                   force: bool = False, on_wait: Callable[[], None] | None = None) -> CaptureResult:
+    """Generate one capture unless an up-to-date one (same hash in the manifest) already exists.
+
+    Raises ownership.ForeignRootError for a root with data the generator did not write.
+    """
+    _check(object_name, distance_cm, config)
+    root = Path(root)
+    ownership.claim(root)
+    with ownership.exclusive(root, on_wait):
+        return _ensure_locked(root, object_name, int(distance_cm), config, force)
+
+
 def generate_capture(root, object_name: str, distance_cm: int, config: SynthConfig = SynthConfig(),
                      force: bool = False) -> Path:
     """Path of the capture `<root>/<object_name>/<distance_cm>`, generated if missing or stale."""
@@ -186,12 +189,22 @@ def generate_capture(root, object_name: str, distance_cm: int, config: SynthConf
 
 def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, objects: Iterable[str] | None = None,
                        config: SynthConfig = SynthConfig(), force: bool = False,
-                       log: Callable[[CaptureResult], None] | None = None) -> list[CaptureResult]:
-    """Ensure every (object, distance) capture; `objects=None` means the whole catalogue."""
+                       log: Callable[[CaptureResult], None] | None = None,
+                       on_wait: Callable[[], None] | None = None) -> list[CaptureResult]:
+    """Ensure every (object, distance) capture; `objects=None` means the whole catalogue.
+
+    Holds the root's lock throughout: a concurrent call waits (`on_wait()` is called once when it has to) and
+    then finds the captures cached. Raises ownership.ForeignRootError for a root with other data.
+    """
+    pairs = [(o, int(d)) for o in (list(objects) if objects is not None else list(CATALOGUE)) for d in distances]
+    for object_name, distance_cm in pairs:
+        _check(object_name, distance_cm, config)
+    root = Path(root)
+    ownership.claim(root)
     results = []
-    for object_name in (list(objects) if objects is not None else list(CATALOGUE)):
-        for distance_cm in distances:
-            result = ensure_capture(root, object_name, int(distance_cm), config, force)
+    with ownership.exclusive(root, on_wait):
+        for object_name, distance_cm in pairs:
+            result = _ensure_locked(root, object_name, distance_cm, config, force)
             results.append(result)
             if log is not None:
                 log(result)

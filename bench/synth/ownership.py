@@ -1,0 +1,92 @@
+"""Who may write into a dataset root, and one writer at a time.
+
+The generator writes only into a root it owns: one that holds its manifest (`synth_manifest.json`). An empty or
+missing root is claimed by creating the manifest first, atomically (O_CREAT | O_EXCL), before anything else is
+written, so a concurrent job never sees generator output without the manifest. Any other content (e.g. the real
+MAROON dataset) makes the root foreign and it is never written. The generator's own hidden leftovers (temp folders
+`<object>/.<distance>.tmp-<pid>-<token>` and `.old-` folders of a crashed run, lock and temp files) never make a
+root look foreign.
+
+Writers serialise on an exclusive flock of `<root>/.synth.lock`: parallel sweep jobs that all ask for the same
+captures wait for the first one and then find them cached.
+"""
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import re
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+from bench.errors import DatasetError
+
+MANIFEST_NAME = "synth_manifest.json"
+LOCK_NAME = ".synth.lock"
+TEMP_FOLDER = re.compile(r"^\.(\d+)\.(tmp|old)-(\d+)-[0-9a-f]+$")   # groups: distance_cm, kind, pid
+
+
+class ForeignRootError(DatasetError):
+    """The root holds data the generator did not write: it is read as it is, never written."""
+
+
+def _generator_entry(path: Path) -> bool:
+    """True for what the generator may leave in a root before (or without) a finished capture."""
+    if path.name == MANIFEST_NAME or path.name.startswith(".synth"):      # manifest, lock, manifest temp files
+        return True
+    # an object folder holding nothing but hidden temp folders (e.g. of a crashed first run)
+    return path.is_dir() and not path.name.startswith(".") and all(
+        TEMP_FOLDER.match(entry.name) for entry in path.iterdir())
+
+
+def holds_foreign_data(root: Path) -> bool:
+    """True when `root` (an existing folder without a manifest) holds anything but generator leftovers."""
+    return any(not _generator_entry(entry) for entry in root.iterdir())
+
+
+def claim(root: Path) -> None:
+    """Make sure the generator owns `root` (created if missing); ForeignRootError when it holds other data."""
+    if root.exists() and not root.is_dir():
+        raise DatasetError(root, "dataset root is not a directory")
+    root.mkdir(parents=True, exist_ok=True)
+    manifest = root / MANIFEST_NAME
+    if manifest.is_file():
+        return
+    # A concurrent generator creates its manifest before any content, so content seen before a manifest appears
+    # is foreign only if there is still no manifest after the scan.
+    if holds_foreign_data(root) and not manifest.is_file():
+        raise ForeignRootError(root, f"holds data the generator did not write (no {MANIFEST_NAME}); not writing")
+    try:
+        fd = os.open(manifest, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+    except FileExistsError:          # another process claimed it first: it is the generator's all the same
+        return
+    with os.fdopen(fd, "w") as handle:
+        handle.write(json.dumps({"captures": {}}))
+
+
+@contextlib.contextmanager
+def exclusive(root: Path, on_wait: Callable[[], None] | None = None) -> Iterator[None]:
+    """Hold the root's generator lock (blocking); `on_wait()` is called once if another process holds it."""
+    with open(root / LOCK_NAME, "a") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            if on_wait is not None:
+                on_wait()
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this id exists on this machine (a temp folder's owner)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
