@@ -215,7 +215,8 @@ def progress_line(cfg: DictConfig, hydra_cfg: DictConfig, rows: list[dict], seco
     (job number of the sweep's jobs), `mm2fsk_d10_realsense: 2 captures, ... -> <run dir>` for a single run."""
     cell = hydra_cfg.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
     cached = sum(bool(row["cached"]) for row in rows)
-    text = f"{cell}: {len(rows)} captures, {len(rows) - cached} computed, {cached} cached, {seconds:.1f} s"
+    captures = f"{len(rows)} capture{'s' if len(rows) != 1 else ''}"
+    text = f"{cell}: {captures}, {len(rows) - cached} computed, {cached} cached, {seconds:.1f} s"
     if hydra_cfg.mode != RunMode.MULTIRUN:
         return f"{text} -> {hydra_cfg.runtime.output_dir}"
     experiment = hydra_cfg.runtime.choices.get("experiment") or "sweep"

@@ -12,7 +12,7 @@ from bench.capture import RadarGrid
 from bench.images import write_uint16_png
 
 RESULT_COLUMNS = ["object", "distance", "frame", "method", "freq", "prior", "f_GHz", "C_g_cm", "C_s_cm", "P_cm",
-                  "P_e_cm", "valid_px", "runtime_ms", "device"]
+                  "P_e_cm", "valid_px", "runtime_ms", "device", "timing"]
 
 
 def depth_to_png_mm(depth_m: np.ndarray) -> np.ndarray:

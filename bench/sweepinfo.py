@@ -1,0 +1,66 @@
+"""What a job of `python -m bench` knows about its sweep: how many jobs it has, and whether it ran alone.
+
+* `SweepSize` (a Hydra callback, configs/config.yaml `hydra.callbacks.size`) counts the multirun's jobs before
+  they are launched and hands the number to them in the environment (`BENCH_SWEEP_JOBS`), for progress lines
+  such as `[table3 5/13] bp_d05: 8 captures, 3 computed, 5 cached, 12.3 s`.
+* `timing_mode` says how a job's runtimes were measured: 'alone' (no other job of the sweep ran at the same time:
+  a single run, the basic launcher, joblib with one worker, a one-job sweep) or 'parallel' (jobs shared the
+  machine: joblib with more than one worker, submitit_local, SLURM arrays with array_parallelism > 1, any other
+  launcher). Results rows carry it in the column `timing`.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.experimental.callback import Callback
+from hydra.types import RunMode
+from omegaconf import DictConfig
+
+JOBS_ENV = "BENCH_SWEEP_JOBS"
+
+
+def count_jobs(params: dict, task_overrides: list[str]) -> int:
+    """Number of jobs the basic sweeper makes of the config's sweeper params and the command-line overrides
+    (later overrides of a key replace earlier ones; a sweep `a,b,c` counts 3)."""
+    counts = {}
+    for override in OverridesParser.create().parse_overrides([f"{k}={v}" for k, v in params.items()]
+                                                             + list(task_overrides)):
+        counts[override.get_key_element()] = (len(list(override.sweep_string_iterator()))
+                                              if override.is_sweep_override() else 1)
+    return math.prod(counts.values())
+
+
+class SweepSize(Callback):
+    """Before a multirun's jobs start: put their number into the environment the jobs inherit."""
+
+    def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
+        try:
+            os.environ[JOBS_ENV] = str(count_jobs(dict(config.hydra.sweeper.get("params") or {}),
+                                                  list(config.hydra.overrides.task)))
+        except Exception:    # noqa: BLE001 - e.g. a glob sweep; the count only decorates progress lines
+            os.environ.pop(JOBS_ENV, None)
+
+
+def sweep_jobs() -> int | None:
+    """The current multirun's number of jobs (None when unknown)."""
+    value = os.environ.get(JOBS_ENV, "")
+    return int(value) if value.isdigit() else None
+
+
+def timing_mode(hydra_cfg: DictConfig) -> str:
+    """'alone' or 'parallel' for the job whose Hydra config (HydraConfig.get()) this is (module docstring)."""
+    if hydra_cfg.mode != RunMode.MULTIRUN or sweep_jobs() == 1:
+        return "alone"
+    launcher = hydra_cfg.launcher
+    target = str(launcher.get("_target_", ""))
+    if target.endswith("BasicLauncher"):
+        return "alone"
+    if target.endswith("JoblibLauncher"):
+        n_jobs = int(launcher.n_jobs)                         # joblib: -1 = every core, -2 = all but one, ...
+        workers = n_jobs if n_jobs > 0 else (os.cpu_count() or 1) + 1 + n_jobs
+        return "alone" if workers <= 1 else "parallel"
+    if target.endswith("SlurmLauncher") and launcher.get("array_parallelism") == 1:
+        return "alone"
+    return "parallel"
