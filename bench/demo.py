@@ -1,14 +1,20 @@
-"""`python -m bench.demo [--root DIR] [--out DIR] [--store DIR] [--results DIR]`: the README's main job.
+"""`python -m bench.demo [--root DIR] [--out DIR] [--store DIR] [--update-results [--results DIR]]`: the main job.
 
-Runs the paper's experiments `table2` and `table3` on the embedded synthetic dataset (generated on first use) as
-Hydra multiruns with the local parallel launcher, exactly as `python -m bench -m experiment=NAME
-hydra/launcher=local` would; finished cells come from the result store, so a re-run computes only missing cells.
-Prints Tables I-III, and copies each sweep root's tables and plots (plus its per-capture rows, the regression
-baseline) into `--results/<table>/` and Table I into `--results/table1.*`.
+1. Generates the embedded synthetic dataset (`--root`, default data/synthetic) in this process, one line per
+   capture, before any sweep starts (cached: a re-run finds every capture up to date in milliseconds).
+2. Runs the paper's experiments `table2` and `table3` as Hydra multiruns, exactly as `python -m bench -m
+   experiment=NAME hydra/launcher=basic` would: one job at a time, so every runtime in the tables is measured
+   alone (rows get `timing=alone`; stored rows timed beside other jobs are re-measured). Finished cells come from
+   the result store (`--store`), so a re-run computes only missing cells. Each job prints one progress line.
+3. Prints Tables I-III. Everything goes under `--out` (default outputs/demo): the sweep roots `<out>/table2|table3/`
+   and Table I `<out>/table1.*`. Tracked files are left alone unless `--update-results` is given: then Table I and
+   each sweep's tables, plots and per-capture rows (the regression baselines) are copied into `--results`
+   (default results/).
 """
 from __future__ import annotations
 
 import argparse
+import collections
 import shutil
 import subprocess
 import sys
@@ -16,21 +22,75 @@ import time
 from pathlib import Path
 
 import pandas as pd
+from omegaconf import OmegaConf
 
-from bench import tables
-from bench.cli import run_guarded
+from bench import cli, tables
+from bench.app import CONFIG_DIR
 
 EXPERIMENTS = ("table2", "table3")
 REPORT_FILES = ("{table}.md", "{table}.csv", "{table}.tex", "runtime_vs_error.png")
+# One job at a time: runtimes measured alone (README, "The main job" has the measured cost of this choice).
+LAUNCHER = "basic"
+QUIET = ("+hydra.job_logging.handlers.console.level=WARNING",   # per-capture lines stay in each job's app.log
+         "hydra.hydra_logging.root.level=WARNING")             # no launcher chatter: the jobs print progress
+
+
+class SweepFailed(Exception):
+    """A sweep exited non-zero; the message is the reason it printed (its last `error:` line)."""
+
+
+def generate_dataset(root: Path) -> None:
+    """The synthetic captures configs/dataset/synthetic.yaml asks for, generated here before any sweep starts."""
+    from bench.synth import CATALOGUE, SynthConfig, generate_catalogue
+    from bench.synth.ownership import ForeignRootError
+
+    settings = OmegaConf.load(CONFIG_DIR / "dataset" / "synthetic.yaml").generate
+    objects = list(CATALOGUE) if settings.objects is None else list(settings.objects)
+    distances = list(settings.distances)
+    total, done = len(objects) * len(distances), iter(range(1, len(objects) * len(distances) + 1))
+    print(f"synthetic dataset {root}: {total} captures", flush=True)
+
+    def log(result) -> None:
+        print(f"[data {next(done)}/{total}] {result.path.parent.name}/{result.path.name}: {result.status}, "
+              f"{result.seconds:.1f} s", flush=True)
+
+    try:
+        generate_catalogue(root, distances, objects, SynthConfig(), log=log,
+                           on_wait=lambda: print(f"waiting for another process generating into {root}", flush=True))
+    except ForeignRootError:
+        print(f"{root} holds data the generator did not write: using it as it is", flush=True)
+
+
+def _reason(stderr_tail: list[str]) -> str:
+    """The failing sweep's own explanation: its last `error:` line (bench.app), else the headline of Hydra's last
+    message (the exception line of a traceback), without Hydra's HYDRA_FULL_ERROR hint."""
+    errors = [line for line in stderr_tail if line.startswith("error:")]
+    if errors:
+        return errors[-1].removeprefix("error:").strip()
+    paragraphs = [block.strip().splitlines() for block in "\n".join(stderr_tail).split("\n\n")
+                  if block.strip() and not block.strip().startswith("Set the environment variable HYDRA_FULL_ERROR")]
+    if not paragraphs:
+        return "no message"
+    last = paragraphs[-1]
+    return last[-1] if any(line.startswith("Traceback") for line in last) else last[0]
 
 
 def sweep(experiment: str, root: Path, out: Path, store: Path) -> pd.DataFrame:
-    """One multirun into `out/<experiment>`; returns its merged rows."""
-    command = [sys.executable, "-m", "bench", "-m", f"experiment={experiment}", "hydra/launcher=local",
-               f"dataset.root={root}", f"store.dir={store}", f"hydra.sweep.dir={out / experiment}"]
-    print(f"\n$ {' '.join(command[1:])}", flush=True)
+    """One multirun into `out/<experiment>`; returns its merged rows. Job lines go to stdout as they finish;
+    stderr is passed through and its tail kept, so a failure ends in the job's own reason (SweepFailed)."""
+    command = [sys.executable, "-m", "bench", "-m", f"experiment={experiment}", f"hydra/launcher={LAUNCHER}",
+               "dataset=synthetic", f"dataset.root={root}", f"store.dir={store}", f"hydra.sweep.dir={out / experiment}",
+               *QUIET]
+    print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
     shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells
-    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+    proc = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
+    tail = collections.deque(maxlen=40)
+    for line in proc.stderr:
+        sys.stderr.write(line)
+        tail.append(line.rstrip())
+    if proc.wait() != 0:
+        raise SweepFailed(f"the {experiment} sweep failed (exit {proc.returncode}): {_reason(list(tail))}"
+                          f"; job logs: {out / experiment}/*/app.log")
     return pd.read_csv(out / experiment / "results.csv")
 
 
@@ -45,36 +105,49 @@ def publish(sweep_root: Path, rows: pd.DataFrame, table: str, results: Path) -> 
     rows.drop(columns="cached").to_csv(target / "results.csv", index=False)
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.demo", description=__doc__)
-    parser.add_argument("--root", type=Path, default=Path("data/synthetic"), help="synthetic dataset root")
-    parser.add_argument("--out", type=Path, default=Path("outputs/demo"), help="sweep roots go here")
-    parser.add_argument("--store", type=Path, default=Path("outputs/store"), help="result store (cache)")
-    parser.add_argument("--results", type=Path, default=tables.RESULTS_DIR, help="committed outputs")
-    args = parser.parse_args()
-    root, out, store = args.root.resolve(), args.out.resolve(), args.store.resolve()
-    started = time.perf_counter()
+def write_table1(folder: Path) -> str:
+    """Table I as `folder/table1.csv` and `.md`; returns its Markdown."""
     table1 = tables.table1()
-    args.results.mkdir(parents=True, exist_ok=True)
-    table1.to_csv(args.results / "table1.csv", index=False, float_format="%.4f")
-    (args.results / "table1.md").write_text(tables.to_markdown(table1) + "\n")
-    texts = [f"Table I: frequency configurations\n\n{tables.to_markdown(table1)}"]
+    folder.mkdir(parents=True, exist_ok=True)
+    table1.to_csv(folder / "table1.csv", index=False, float_format="%.4f")
+    (folder / "table1.md").write_text(tables.to_markdown(table1) + "\n")
+    return tables.to_markdown(table1)
+
+
+def main() -> int:
+    parser = cli.ArgumentParser(prog="python -m bench.demo", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--root", type=Path, default=Path("data/synthetic"), help="synthetic dataset root")
+    parser.add_argument("--out", type=Path, default=Path("outputs/demo"), help="sweep roots and Table I go here")
+    parser.add_argument("--store", type=Path, default=Path("outputs/store"), help="result store (cache)")
+    parser.add_argument("--update-results", action="store_true",
+                        help="also copy the tables, plots and baselines into --results (tracked files)")
+    parser.add_argument("--results", type=Path, default=tables.RESULTS_DIR,
+                        help="where --update-results copies to (default: the committed results/)")
+    args = parser.parse_args()
+    root, out, store = args.root.resolve(), cli.output_dir(args.out).resolve(), args.store.resolve()
+    started = time.perf_counter()
+    generate_dataset(root)
+    texts = [f"Table I: frequency configurations\n\n{write_table1(out)}"]
     for experiment in EXPERIMENTS:
+        sweep_started = time.perf_counter()
         try:
             rows = sweep(experiment, root, out, store)
-        except subprocess.CalledProcessError as err:   # the sweep printed its own error on stderr
-            print(f"error: the {experiment} sweep failed (exit {err.returncode}); its jobs are under "
-                  f"{out / experiment}", file=sys.stderr)
+        except SweepFailed as err:
+            print(f"error: {err}", file=sys.stderr)
             return 1
-        publish(out / experiment, rows, experiment, args.results)
         texts.append((out / experiment / f"{experiment}.md").read_text())
         print(f"{experiment}: {len(rows)} rows, {int((~rows.cached).sum())} computed, {int(rows.cached.sum())} "
-              f"from the store", flush=True)
+              f"from the store, {time.perf_counter() - sweep_started:.0f} s", flush=True)
+    if args.update_results:
+        write_table1(args.results)
+        for experiment in EXPERIMENTS:
+            publish(out / experiment, pd.read_csv(out / experiment / "results.csv"), experiment, args.results)
     print("\n\n".join(["", *texts]))
-    print(f"sweep roots under {out}; tables and plots copied to {args.results}; "
-          f"{time.perf_counter() - started:.0f} s in all")
+    copied = f"; tables, plots and baselines copied to {args.results}" if args.update_results else ""
+    print(f"outputs under {out}{copied}; {time.perf_counter() - started:.0f} s in all")
     return 0
 
 
 if __name__ == "__main__":
-    run_guarded(main)
+    cli.run_guarded(main)

@@ -1,0 +1,65 @@
+"""The main job (bench.demo): outputs under --out, tracked results/ only with --update-results, a failing sweep
+ends in its own reason. The sweeps themselves are tested in test_app.py; here they are replaced by a stand-in."""
+from __future__ import annotations
+
+import sys
+
+import pandas as pd
+import pytest
+
+from bench import demo
+
+
+def _fake_sweep(experiment, root, out, store):
+    """What a finished sweep leaves in its root (bench.sweep), in miniature."""
+    folder = out / experiment
+    (folder / "depth_errors").mkdir(parents=True)
+    for name in demo.REPORT_FILES:
+        (folder / name.format(table=experiment)).write_text(f"{experiment}\n")
+    (folder / "depth_errors" / "01_plate_30_000000.png").write_bytes(b"png")
+    rows = pd.DataFrame({"object": ["01_plate"], "P_cm": [0.1], "timing": ["alone"], "cached": [False]})
+    rows.to_csv(folder / "results.csv", index=False)
+    return rows
+
+
+def _main(monkeypatch, tmp_path, *args):
+    monkeypatch.setattr(demo, "generate_dataset", lambda root: None)
+    monkeypatch.setattr(demo, "sweep", _fake_sweep)
+    monkeypatch.setattr(sys, "argv", ["bench.demo", "--root", str(tmp_path / "data"), "--out", str(tmp_path / "out"),
+                                      "--store", str(tmp_path / "store"), "--results", str(tmp_path / "results"),
+                                      *args])
+    return demo.main()
+
+
+def test_outputs_stay_under_out(monkeypatch, tmp_path):
+    assert _main(monkeypatch, tmp_path) == 0
+    assert not (tmp_path / "results").exists()
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {"table1.csv", "table1.md", "table2", "table3"}
+
+
+def test_update_results_copies_tables_plots_and_baselines(monkeypatch, tmp_path):
+    assert _main(monkeypatch, tmp_path, "--update-results") == 0
+    results = tmp_path / "results"
+    assert {p.name for p in results.iterdir()} == {"table1.csv", "table1.md", "table2", "table3"}
+    assert (results / "table3" / "runtime_vs_error.png").is_file()
+    assert (results / "table3" / "depth_errors" / "01_plate_30_000000.png").is_file()
+    baseline = pd.read_csv(results / "table2" / "results.csv")
+    assert "cached" not in baseline and list(baseline.timing) == ["alone"]
+
+
+def test_a_failing_sweep_ends_in_its_own_reason(tmp_path, capsys):
+    root = tmp_path / "not_a_folder"
+    root.write_text("")
+    with pytest.raises(demo.SweepFailed, match=f"the table2 sweep failed \\(exit 2\\): {root}: dataset root is "
+                                               "not a directory; job logs: "):
+        demo.sweep("table2", root, tmp_path / "out", tmp_path / "store")
+    assert f"error: {root}: dataset root is not a directory" in capsys.readouterr().err   # passed through
+
+
+def test_the_reason_of_a_hydra_error_is_its_headline_or_exception():
+    hint = "Set the environment variable HYDRA_FULL_ERROR=1 for a complete stack trace."
+    assert demo._reason(["Could not override 'x'.", "To append use +x=1", "", hint]) == "Could not override 'x'."
+    traceback = ["Error executing job with overrides: ['cell=bp_d05']", "Traceback (most recent call last):",
+                 '  File "bench/app.py", line 1, in main', "RuntimeError: out of memory", "", hint]
+    assert demo._reason(traceback) == "RuntimeError: out of memory"
+    assert demo._reason(["warning: slow", "error: data/x: no captures found"]) == "data/x: no captures found"
