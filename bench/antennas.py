@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench import safe_io
 from bench.errors import DatasetError
 
 N_STORED = 96          # rows in Tx.dat / Rx.dat and size of the stored frame axes
@@ -40,10 +41,11 @@ def file_to_radar_space(xyz_file_m: np.ndarray) -> np.ndarray:
 def read_antenna_file(path: str | Path) -> np.ndarray:
     """Read a QAR50 `Tx.dat`/`Rx.dat` CSV (header `x,y,z`, 96 rows, metres) in its file frame."""
     path = Path(path)
+    data = safe_io.read_bytes(path, "text", roots=())      # user configuration: no dataset root applies
     try:
-        text = path.read_text()
-    except OSError as err:
-        raise DatasetError(path, f"cannot read antenna file ({err.strerror or err})") from None
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise DatasetError(path, "antenna file is not UTF-8 text") from None
     lines = [line.strip() for line in text.splitlines() if line.strip()]
     if not lines or [h.strip().lower() for h in lines[0].split(",")] != ["x", "y", "z"]:
         raise DatasetError(path, "antenna file must start with the header line 'x,y,z'")

@@ -1,23 +1,40 @@
-"""PNG/JPEG image I/O for depth images and masks (Pillow), with errors that name the file."""
+"""PNG/JPEG image I/O for depth images and masks (Pillow), bounded, with errors that name the file.
+
+A dataset image is read through bench.safe_io (a regular file inside the dataset, within `image_bytes`); its
+width and height are taken from the header and refused beyond `image_pixels` before any pixel is decoded
+(Pillow's own decompression-bomb check, warning and error alike, ends in the same one-line DatasetError).
+"""
 from __future__ import annotations
 
+import io
+import warnings
 from pathlib import Path
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
+from bench import safe_io
 from bench.errors import DatasetError
+from bench.limits import current_limits, too_large
 
 _UINT16_MODES = {"I;16", "I;16B", "I;16L", "I"}
 
 
-def _open(path: Path) -> Image.Image:
+def _open(path: Path, formats: tuple[str, ...] = ("PNG",)) -> Image.Image:
+    data = safe_io.read_bytes(path, "image")
     try:
-        image = Image.open(path)
-        image.load()
-    except FileNotFoundError:
-        raise DatasetError(path, "file is missing") from None
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as err:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            image = Image.open(io.BytesIO(data), formats=list(formats))
+            width, height = image.size
+            if width * height > current_limits().image_pixels:
+                raise DatasetError(path, too_large(f"the image's pixel count ({width}x{height})", width * height,
+                                                   "image_pixels"))
+            image.load()
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning) as err:
+        raise DatasetError(path, f"image refused as a decompression bomb ({err}); "
+                                 f"at most {current_limits().image_pixels:,} pixels are read") from None
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError, EOFError, MemoryError) as err:
         raise DatasetError(path, f"not a readable image ({err})") from None
     return image
 
@@ -29,7 +46,7 @@ def read_uint16_png(path: Path) -> np.ndarray:
         raise DatasetError(path, f"expected a single-channel 16-bit image, found mode '{image.mode}'")
     values = np.asarray(image)
     if values.dtype != np.uint16:
-        if values.min() < 0 or values.max() > 65535:
+        if values.min(initial=0) < 0 or values.max(initial=0) > 65535:
             raise DatasetError(path, "pixel values outside the uint16 range")
         values = values.astype(np.uint16)
     return values

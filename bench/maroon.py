@@ -4,51 +4,121 @@ Every problem raises a DatasetError that names the file and says what is wrong. 
 kept: the last frame is the default, radar frames 96x96 are sliced to the 94x94 imaging array, the grid comes
 from the frame's `volume` entry, the viewer's `mask_bb` defaults are applied (in memory only), the RealSense depth
 is read with the `rgb` intrinsics. Behaviour that is not kept: nothing is migrated or written back.
+
+Hostile input is bounded (bench.limits, bench.safe_io): only regular files inside the capture's dataset root are
+opened, each within its kind's size limit; every size the data declares (array shapes, image pixels, grid pixels
+and voxels, the erosion kernel, JSON depth and number lengths) is checked before anything is allocated. Folder
+names: a distance folder is named with ASCII digits only (a superscript or other Unicode digit is not one); object
+and distance folders whose names are not UTF-8 or hold control characters (a newline) cannot be written into
+results.csv and file names faithfully, so discovery skips them with a warning naming them (escaped), and reading
+one directly is a DatasetError.
 """
 from __future__ import annotations
 
+import logging
 import math
 import re
 from pathlib import Path
 
 import numpy as np
 
+from bench import safe_io
 from bench.alignment import read_alignment
 from bench.antennas import N_STORED, USED, AntennaArray, load_antenna_array
 from bench.capture import CameraIntrinsics, Capture, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
-from bench.errors import DatasetError
+from bench.errors import DatasetError, display_path
 from bench.images import read_binary_mask, read_uint16_png
 from bench.jsonio import read_json
+from bench.limits import Limits, current_limits, too_large, use_limits
 from bench.safe_pickle import load_pickled_dict
+from metrics.masks import erosion_kernel_mm, kernel_px_for_pitch
 
 RADAR_FOLDER = "radar_72.0_82.0_128"
 MESH_CANDIDATES = ("mesh_masked_smoothed.obj", "mesh_masked.obj", "mesh_smoothed.obj", "mesh.obj")
 # MAROON's configured reconstruction grid, used only when calibration.json has no entry for a frame (2.5, 7).
 CONFIG_GRID = RadarGrid(bb_min_m=(-0.15, -0.15, 0.25), bb_max_m=(0.15, 0.15, 0.40), size=(301, 301, 151))
 PARTS = ("radar", "realsense", "mesh")
-_FRAME_FILE = re.compile(r"^(\d{6})\.npy$")
-_IMAGE_FILE = re.compile(r"^(\d{6})\.png$")
+MIN_FREQ_STEP_HZ = 1e6        # the smallest frequency step of a sweep (MAROON: 78.7 MHz)
+MIN_GRID_STEP_M = 1e-6         # a grid step below 1 um is no radar grid (and breaks MAROON's intrinsics)
+MAX_MESH_COORDINATE = 1e6      # |vertex| in the mesh file's units (metres or millimetres): beyond is no object
+_FRAME_FILE = re.compile(r"^([0-9]{6})\.npy$")
+_IMAGE_FILE = re.compile(r"^([0-9]{6})\.png$")
+_DISTANCE = re.compile(r"^[0-9]{1,6}$")          # ASCII digits only: '³' or '٣' is not a distance
+_FRAME_KEY = re.compile(r"^[0-9]{1,9}$")
+log = logging.getLogger("bench")
 _MASK_BB_KEYS = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 
 
 # ----------------------------------------------------------------------------------------------- discovery
+def name_problem(name: str) -> str | None:
+    """Why a folder name cannot name a capture in results and file names (None: it can)."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return "its name is not valid UTF-8"
+    if not name.isprintable():
+        return "its name holds control characters (e.g. a newline)"
+    return None
+
+
+def is_distance_folder(path: Path) -> bool:
+    """A distance folder: a directory named with ASCII digits (centimetres)."""
+    return bool(_DISTANCE.match(path.name)) and path.is_dir()
+
+
 def discover_captures(root: str | Path) -> list[Path]:
-    """All capture folders `root/<object>/<distance>` (distance a number of centimetres), sorted."""
+    """All capture folders `root/<object>/<distance>` (distance a number of centimetres, ASCII digits), sorted.
+
+    Folders whose names cannot be written into results (not UTF-8, control characters) are skipped with a warning
+    (logger `bench`); a folder named with non-ASCII digits is no distance folder and is skipped with a warning too.
+    """
     root = Path(root)
     if not root.is_dir():
         raise DatasetError(root, "dataset root is not a directory")
-    captures = [d for obj in sorted(root.iterdir()) if obj.is_dir() and not obj.name.startswith((".", "00_"))
-                for d in sorted(obj.iterdir(), key=lambda p: p.name) if d.is_dir() and d.name.isdigit()]
+    captures, skipped = [], 0
+    for obj in sorted(root.iterdir()):
+        if obj.name.startswith((".", "00_")) or not obj.is_dir():
+            continue
+        distances = []
+        for folder in sorted(obj.iterdir(), key=lambda p: p.name):
+            if _DISTANCE.match(folder.name) and folder.is_dir():
+                distances.append(folder)
+            elif (folder.name.isdigit() or folder.name.isnumeric()) and folder.is_dir():
+                skipped += 1
+                log.warning("%s: skipped, not a distance folder (its name must be ASCII digits, in cm)",
+                            display_path(folder))
+        problem = name_problem(obj.name) if distances else None
+        if problem is not None:
+            skipped += len(distances)
+            log.warning("%s: skipped, %s", display_path(obj), problem)
+            continue
+        captures.extend(distances)
     if not captures:
-        raise DatasetError(root, "no captures found (expected folders <object>/<distance_cm>/)")
+        hint = f"; {skipped} folder(s) skipped, see the warnings" if skipped else ""
+        raise DatasetError(root, f"no captures found (expected folders <object>/<distance_cm>/{hint})")
     return captures
 
 
 # ------------------------------------------------------------------------------------------------ metadata
 def _number(path: Path, value, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise DatasetError(path, f"{what} must be a finite number, found {value!r}")
-    return float(value)
+    """A finite real number from JSON (int or float, not bool or string), as float."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DatasetError(path, f"{what} must be a number, found {_short(value)}")
+    try:
+        number = float(value)
+    except OverflowError:
+        raise DatasetError(path, f"{what} is too large for a float ({len(str(value))} digits)") from None
+    if not math.isfinite(number):
+        raise DatasetError(path, f"{what} must be a finite number, found {number}")
+    return number
+
+
+def _short(value) -> str:
+    """A value for a message, at most 60 characters (a hostile file may hold megabytes in one value)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 64:
+        return f"an integer of {value.bit_length()} bits"
+    text = repr(value) if isinstance(value, (str, int, float, bool)) or value is None else type(value).__name__
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def read_metadata(capture_dir: Path) -> Metadata:
@@ -62,7 +132,9 @@ def read_metadata(capture_dir: Path) -> Metadata:
         raise DatasetError(path, f"distance_meters must be in metres (0-10), found {distance_m}")
     erosion = raw.get("mask_erosion", 0)
     if isinstance(erosion, bool) or not isinstance(erosion, int) or erosion < 0:
-        raise DatasetError(path, f"mask_erosion must be a non-negative integer, found {erosion!r}")
+        raise DatasetError(path, f"mask_erosion must be a non-negative integer, found {_short(erosion)}")
+    if erosion > current_limits().mask_erosion:
+        raise DatasetError(path, too_large("mask_erosion", erosion, "mask_erosion"))
     bb = raw.get("mask_bb", {})
     if not isinstance(bb, dict) or set(bb) - set(_MASK_BB_KEYS):
         raise DatasetError(path, f"mask_bb must be a dict with keys among {', '.join(_MASK_BB_KEYS)}")
@@ -78,6 +150,9 @@ def read_metadata(capture_dir: Path) -> Metadata:
             raise DatasetError(path, f"mask_bb.{axis}min ({low}) must be below {axis}max ({high})")
     labels = raw.get("labels", [])
     calibration = raw.get("calibration")
+    if isinstance(calibration, str) and (not calibration or name_problem(calibration) or "/" in calibration
+                                         or calibration in (".", "..")):
+        raise DatasetError(path, f"calibration must name a folder of 00_registration, found {_short(calibration)}")
     return Metadata(distance_m=distance_m, mask_erosion=erosion, mask_bb_m=mask_bb_m,
                     calibration=calibration if isinstance(calibration, str) else None,
                     labels=tuple(str(label) for label in labels) if isinstance(labels, list) else (), raw=raw)
@@ -86,7 +161,7 @@ def read_metadata(capture_dir: Path) -> Metadata:
 def alignment_path(capture_dir: Path, metadata: Metadata) -> Path:
     """alignment.json of the capture, else `<root>/00_registration/<metadata.calibration>/alignment.json`."""
     local = capture_dir / "alignment.json"
-    if local.is_file() or metadata.calibration is None:
+    if local.exists() or local.is_symlink() or metadata.calibration is None:
         return local
     fallback = capture_dir.parent.parent / "00_registration" / metadata.calibration / "alignment.json"
     return fallback if fallback.is_file() else local
@@ -119,25 +194,37 @@ def list_radar_frames(radar_dir: Path) -> list[int]:
 
 
 def _parse_grid(path: Path, key: str, entry) -> RadarGrid:
-    try:
-        bb_min = [float(v) for v in entry["bb_min"]]
-        bb_max = [float(v) for v in entry["bb_max"]]
-        size = entry["grid_size"]
-    except (KeyError, TypeError, ValueError):
-        raise DatasetError(path, f"'{key}' needs bb_min, bb_max (3 numbers) and grid_size (3 integers)") from None
-    if len(bb_min) != 3 or len(bb_max) != 3 or not isinstance(size, list) or len(size) != 3:
-        raise DatasetError(path, f"'{key}' bb_min, bb_max and grid_size must have 3 entries each")
+    """A `volume` entry: bb_min, bb_max (3 numbers each, metres) and grid_size (3 integers) within the limits."""
+    if not isinstance(entry, dict) or not all(name in entry for name in ("bb_min", "bb_max", "grid_size")):
+        raise DatasetError(path, f"'{key}' needs bb_min, bb_max (3 numbers) and grid_size (3 integers)")
+    bounds = {}
+    for name in ("bb_min", "bb_max", "grid_size"):
+        values = entry[name]
+        if not isinstance(values, list) or len(values) != 3:
+            raise DatasetError(path, f"'{key}' {name} must be a list of 3 numbers, found {_short(values)}")
+        bounds[name] = values
+    bb_min = [_number(path, v, f"'{key}' bb_min") for v in bounds["bb_min"]]
+    bb_max = [_number(path, v, f"'{key}' bb_max") for v in bounds["bb_max"]]
+    size = bounds["grid_size"]
     if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in size):
-        raise DatasetError(path, f"'{key}' grid_size must be positive integers, found {size}")
-    if not all(math.isfinite(v) for v in bb_min + bb_max):
-        raise DatasetError(path, f"'{key}' bounds must be finite")
-    if size[0] < 2 or size[1] < 2 or math.prod(size) > 2_000_000_000:
-        raise DatasetError(path, f"'{key}' grid_size {size} must have nx, ny >= 2 and at most 2e9 voxels")
+        raise DatasetError(path, f"'{key}' grid_size must be positive integers, found "
+                                 f"[{', '.join(_short(n) for n in size)}]")
+    if size[0] < 2 or size[1] < 2:
+        raise DatasetError(path, f"'{key}' grid_size {size} must have nx, ny >= 2")
+    limits = current_limits()
+    if size[0] * size[1] > limits.grid_pixels:
+        raise DatasetError(path, too_large(f"'{key}' grid_size {size}: nx * ny", size[0] * size[1], "grid_pixels"))
+    if math.prod(size) > limits.grid_voxels:
+        raise DatasetError(path, too_large(f"'{key}' grid_size {size}: nx * ny * nz", math.prod(size),
+                                           "grid_voxels"))
     for axis, n, low, high in zip("xyz", size, bb_min, bb_max):
         if (n > 1 and not high > low) or (n == 1 and high < low):
             raise DatasetError(path, f"'{key}' {axis} range [{low}, {high}] is empty for {n} samples")
         if max(abs(low), abs(high)) > 10.0:
             raise DatasetError(path, f"'{key}' {axis} bounds must be in metres (|value| <= 10)")
+        if n > 1 and (high - low) / (n - 1) < MIN_GRID_STEP_M:
+            raise DatasetError(path, f"'{key}' {axis} step {(high - low) / (n - 1):.3g} m is below "
+                                     f"{MIN_GRID_STEP_M:g} m (bounds in metres?)")
     if bb_min[2] <= 0.0:
         raise DatasetError(path, f"'{key}' z range must lie in front of the array (z > 0), found zmin {bb_min[2]}")
     return RadarGrid(bb_min_m=tuple(bb_min), bb_max_m=tuple(bb_max), size=tuple(size))
@@ -149,11 +236,12 @@ def read_radar_grids(radar_dir: Path) -> dict[int, RadarGrid]:
     data = read_json(path)
     grids = {}
     for key, entry in data.items():
-        if not key.isdigit():
+        if not _FRAME_KEY.match(key):
             continue
         if not isinstance(entry, dict):
             raise DatasetError(path, f"entry '{key}' must be a dict")
-        volume = entry.get("volume") or (entry.get("depth") if "bb_min" in entry.get("depth", {}) else None)
+        depth = entry.get("depth")
+        volume = entry.get("volume") or (depth if isinstance(depth, dict) and "bb_min" in depth else None)
         if volume is not None:
             grids[int(key)] = _parse_grid(path, key, volume)
     return grids
@@ -173,6 +261,11 @@ def _check_frequencies(path: Path, freqs) -> np.ndarray:
         raise DatasetError(path, f"'fvec' must lie in 1 GHz - 1 THz (in Hz), found {freqs_hz.min():g}-{freqs_hz.max():g}")
     if freqs_hz.size > 1 and not np.all(np.diff(freqs_hz) > 0):
         raise DatasetError(path, "'fvec' must be strictly increasing")
+    if freqs_hz.size > 1 and np.diff(freqs_hz).min() < MIN_FREQ_STEP_HZ:
+        i = int(np.argmin(np.diff(freqs_hz)))
+        raise DatasetError(path, f"'fvec' has two frequencies {freqs_hz[i + 1] - freqs_hz[i]:.3g} Hz apart (at "
+                                 f"{freqs_hz[i] / 1e9:.6f} GHz); steps below {MIN_FREQ_STEP_HZ:g} Hz are no sweep "
+                                 "steps (their depth ambiguity exceeds 75 m)")
     return freqs_hz
 
 
@@ -180,7 +273,7 @@ def read_radar_frame(radar_dir: Path, index: int, grid: RadarGrid, empty_filtere
     """One raw frame, validated, sliced to the 94x94 imaging array, cast to complex64."""
     name = f"{index:06d}_emptyfiltered.npy" if empty_filtered else f"{index:06d}.npy"
     path = radar_dir / "calibrated_data" / name
-    if not path.is_file():
+    if not (path.exists() or path.is_symlink()):
         raise DatasetError(path, "frame file is missing")
     frame = load_pickled_dict(path)
     for key in ("xr", "fvec"):
@@ -199,7 +292,11 @@ def read_radar_frame(radar_dir: Path, index: int, grid: RadarGrid, empty_filtere
         xr = xr[USED, USED, :]
     signal = np.ascontiguousarray(xr, dtype=np.complex64)
     if not np.all(np.isfinite(signal.view(np.float32))):
-        raise DatasetError(path, "'xr' has NaN or Inf values")
+        raise DatasetError(path, "'xr' has NaN or Inf values (or values beyond float32's range)")
+    largest = float(np.abs(signal.view(np.float32)).max(initial=0.0))
+    if largest > current_limits().signal_abs:
+        raise DatasetError(path, too_large("the largest real or imaginary part of 'xr' (the methods' float32 sums "
+                                           "would overflow)", largest, "signal_abs"))
     timestamp_s = None
     stamps = frame.get("timestamp_us")
     if stamps is not None:
@@ -212,7 +309,8 @@ def read_radar_frame(radar_dir: Path, index: int, grid: RadarGrid, empty_filtere
 def declared_frame_count(radar_dir: Path, first_frame: int) -> int | None:
     """`number_of_measurements` of the first frame file (the reference loader reads it from frame 0)."""
     path = radar_dir / "calibrated_data" / f"{first_frame:06d}.npy"
-    count = load_pickled_dict(path).get("number_of_measurements")
+    with safe_io.use_root(radar_dir.parent):
+        count = load_pickled_dict(path).get("number_of_measurements")
     count = count.item() if isinstance(count, np.generic) else count
     return count if isinstance(count, int) and not isinstance(count, bool) else None
 
@@ -267,7 +365,7 @@ def read_realsense(realsense_dir: Path, index: int = -1) -> tuple[DepthFrame, li
         depth = depth_mm.astype(np.uint16)
     mask_path = realsense_dir / "mask" / f"{index:06d}.png"
     mask = None
-    if mask_path.is_file():
+    if mask_path.exists() or mask_path.is_symlink():        # a FIFO or a dangling link is refused, not skipped
         mask = read_binary_mask(mask_path)
         if mask.shape != depth.shape:
             raise DatasetError(mask_path, f"mask is {mask.shape[1]}x{mask.shape[0]}, depth is "
@@ -282,34 +380,55 @@ def read_realsense(realsense_dir: Path, index: int = -1) -> tuple[DepthFrame, li
 def find_mesh(photogrammetry_dir: Path) -> Path:
     """The ground-truth mesh: `mesh_masked_smoothed.obj`, then mesh_masked, mesh_smoothed, mesh (.obj)."""
     for name in MESH_CANDIDATES:
-        if (photogrammetry_dir / name).is_file():
-            return photogrammetry_dir / name
+        candidate = photogrammetry_dir / name
+        if candidate.exists() or candidate.is_symlink():   # a FIFO or a link is refused by read_mesh, not skipped
+            return candidate
     raise DatasetError(photogrammetry_dir, f"no mesh file (looked for {', '.join(MESH_CANDIDATES)})")
 
 
 def _obj_face_lines(path: Path) -> int | None:
-    """Number of face lines (`f ...`) of an OBJ file, None for other formats: Open3D skips broken faces silently."""
+    """Number of face lines (`f ...`) of an OBJ file, None for other formats: Open3D skips broken faces silently.
+    Streamed in blocks through the checked opener (a regular file inside the dataset, within `mesh_bytes`)."""
     if path.suffix.lower() != ".obj":
         return None
-    text = path.read_bytes()
-    return text.count(b"\nf ") + text.startswith(b"f ")
+    count, tail = 0, b"\n"                     # a leading "f " counts like one after a newline
+    with safe_io.open_checked(path, "mesh") as (handle, _):
+        for block in iter(lambda: handle.read(1 << 24), b""):
+            data = tail + block
+            count += data.count(b"\nf ")           # the 2-byte tail cannot hold a whole match counted before
+            tail = data[-2:]
+    return count
 
 
 def read_mesh(path: Path) -> Mesh:
-    """A triangle mesh via Open3D (imported here only, so the methods never need it)."""
+    """A triangle mesh via Open3D (imported here only, so the methods never need it).
+
+    The file passes the checks of bench.safe_io first (regular, inside the dataset, within `mesh_bytes`) and Open3D
+    reads its real path; vertices must be finite and within 1e6 of the origin (metres or millimetres), and at least
+    one triangle must have a nonzero area (degenerate triangles alone cover no pixel)."""
     import open3d as o3d
 
+    real = safe_io.checked_path(path)
+    safe_io.file_size(path, "mesh")
+    faces = _obj_face_lines(path)
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    mesh = o3d.io.read_triangle_mesh(str(path))
+    mesh = o3d.io.read_triangle_mesh(str(real))
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     triangles = np.asarray(mesh.triangles, dtype=np.int64)
     if len(vertices) == 0 or len(triangles) == 0:
         raise DatasetError(path, "mesh has no vertices or no triangles (missing, empty or unreadable OBJ)")
     if not np.all(np.isfinite(vertices)):
         raise DatasetError(path, "mesh has non-finite vertex coordinates")
+    largest = float(np.abs(vertices).max())
+    if largest > MAX_MESH_COORDINATE:
+        raise DatasetError(path, f"mesh vertex coordinates reach {largest:.3g}; at most {MAX_MESH_COORDINATE:g} "
+                                 "(metres or millimetres) are plausible")
     if triangles.min() < 0 or triangles.max() >= len(vertices):
         raise DatasetError(path, "mesh has triangle indices outside its vertex list")
-    faces = _obj_face_lines(path)
+    corners = vertices[triangles]
+    doubled_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    if not np.any(doubled_area > 0.0):
+        raise DatasetError(path, f"all {len(triangles)} triangles of the mesh are degenerate (zero area)")
     if faces is not None and len(triangles) < faces:
         raise DatasetError(path, f"mesh file has {faces} face lines but only {len(triangles)} triangles could be "
                                  "read (truncated or malformed faces)")
@@ -318,24 +437,48 @@ def read_mesh(path: Path) -> Mesh:
 
 # ------------------------------------------------------------------------------------------------- capture
 def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, ...] = PARTS,
-                 empty_filtered: bool = False, antennas: AntennaArray | None = None) -> Capture:
+                 empty_filtered: bool = False, antennas: AntennaArray | None = None,
+                 limits: Limits | None = None) -> Capture:
     """Read one capture folder `root/object/distance` into a Capture.
 
     `frame` is the radar frame index (-1 = last, as MAROON evaluates); `parts` chooses what to load. The radar is
     required when asked for; a missing RealSense or photogrammetry folder leaves that part None with a note,
-    while a present but malformed file raises.
+    while a present but malformed file raises. Every file must lie inside the capture's dataset root
+    (bench.safe_io) and within `limits` (default: bench.limits.current_limits()).
     """
     capture_dir = Path(capture_dir)
-    if not capture_dir.is_dir():
-        raise DatasetError(capture_dir, "capture folder does not exist")
-    if not capture_dir.name.isdigit():
-        raise DatasetError(capture_dir, "capture folder name must be the distance in centimetres (e.g. 30)")
     unknown = set(parts) - set(PARTS)
     if unknown:
         raise ValueError(f"unknown capture parts {sorted(unknown)}; choose from {PARTS}")
+    if not capture_dir.is_dir():
+        raise DatasetError(capture_dir, "capture folder does not exist")
+    if not _DISTANCE.match(capture_dir.name):
+        raise DatasetError(capture_dir, "capture folder name must be the distance in centimetres in ASCII digits "
+                                        "(e.g. 30)")
+    for folder in (capture_dir.absolute().parent, capture_dir):
+        problem = name_problem(folder.name)
+        if problem is not None:
+            raise DatasetError(folder, f"cannot name a capture in results: {problem}")
+    with use_limits(limits), safe_io.use_root(capture_dir):
+        return _read_capture(capture_dir, frame, parts, empty_filtered, antennas)
+
+
+def _check_erosion_kernel(capture_dir: Path, metadata: Metadata, grid: RadarGrid) -> None:
+    """The P_e / silhouette kernel in pixels of the metric grid (metrics.masks) within `erosion_kernel_px`."""
+    pitch_mm = 1000.0 * min((hi - lo) / (n - 1) for lo, hi, n in zip(grid.bb_min_m[:2], grid.bb_max_m[:2],
+                                                                       grid.size[:2]))
+    kernel_px = kernel_px_for_pitch(erosion_kernel_mm(metadata.mask_erosion), pitch_mm)
+    if kernel_px > current_limits().erosion_kernel_px:
+        raise DatasetError(capture_dir / "metadata.json", too_large(
+            f"mask_erosion {metadata.mask_erosion} on the {grid.size[0]}x{grid.size[1]} grid of {pitch_mm:.3g} mm "
+            "pixels gives an erosion kernel whose size in pixels", kernel_px, "erosion_kernel_px"))
+
+
+def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
+                  antennas: AntennaArray | None) -> Capture:
     metadata = read_metadata(capture_dir)
     align_path = alignment_path(capture_dir, metadata)
-    if not align_path.is_file():
+    if not (align_path.exists() or align_path.is_symlink()):
         raise DatasetError(align_path, "alignment.json is missing (and no 00_registration fallback was found)")
     radar_dir = find_radar_folder(capture_dir)
     frames = list_radar_frames(radar_dir)
@@ -345,15 +488,18 @@ def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, 
     if align_path.parent != capture_dir:
         capture.notes.append(f"alignment from fallback {align_path}")
     if "radar" in parts:
+        if not -len(frames) <= frame:
+            raise DatasetError(radar_dir / "calibrated_data", f"frame {frame} not present ({len(frames)} frames)")
         index = frames[frame] if frame < 0 else frame
         if index not in frames:
-            raise DatasetError(radar_dir / "calibrated_data", f"frame {index} not present (have {frames})")
+            raise DatasetError(radar_dir / "calibrated_data", f"frame {index} not present (have {_frame_list(frames)})")
         grids = read_radar_grids(radar_dir)
         grid = grids.get(index)
         if grid is None:
             grid = CONFIG_GRID
             capture.notes.append(f"{radar_dir / 'calibration.json'}: no volume entry for frame {index:06d}; "
                                  "using MAROON's configured grid")
+        _check_erosion_kernel(capture_dir, metadata, grid)
         capture.radar = read_radar_frame(radar_dir, index, grid, empty_filtered)
     if "realsense" in parts:
         if (capture_dir / "realsense").is_dir():
@@ -367,3 +513,7 @@ def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, 
         else:
             capture.notes.append(f"{capture_dir / 'photogrammetry'}: missing, no ground truth")
     return capture
+
+
+def _frame_list(frames: list[int]) -> str:
+    return ", ".join(map(str, frames)) if len(frames) <= 8 else f"{frames[0]}..{frames[-1]}, {len(frames)} frames"
