@@ -49,7 +49,8 @@ case "$job" in
     setup
     ;;
   *)
-    echo "usage: bash run.sh demo|test|setup [args...]" >&2
+    if [ -z "$job" ]; then problem="no job given"; else problem="unknown job '$job'"; fi
+    echo "error: bash run.sh: $problem (usage: bash run.sh demo|test|setup [args...])" >&2
     exit 2
     ;;
 esac

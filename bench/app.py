@@ -230,6 +230,8 @@ def main(cfg: DictConfig) -> None:
     _isolate_warp_cache()
     try:
         cli.resolve_device(str(cfg.device), option="device=")   # before generating or reading anything
+        if cfg.store.dir is not None:
+            cli.check_creatable_dir(to_absolute_path(str(cfg.store.dir)), f"store.dir={cfg.store.dir}")
         started = time.perf_counter()
         rows = run(cfg, out_dir, generate=synthetic_asked(list(hydra_cfg.overrides.task)),
                    timing=timing_mode(hydra_cfg))

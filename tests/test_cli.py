@@ -1,0 +1,300 @@
+"""Every README command and a table of user mistakes, through the real entry points (subprocesses).
+
+* README commands: `README_RUNS` maps each command the README shows (its ```bash blocks and the `python -m` /
+  `bash run.sh` spans of its prose) to what this test runs for it; `test_readme_commands_are_all_covered` fails
+  when the README and the map drift apart. Cheap commands run for real on the `synth_root` fixture or on copies of
+  committed files; long ones (the demo, sweeps, the full benchmarks) run with `--help`, Hydra sweeps are composed
+  with `--cfg all` (every group and launcher resolved, nothing run). Each must exit 0 without a traceback.
+* Mistakes: `MISTAKES` lists a command, the exit code and the one line it must print on stderr
+  (`error: <what>: <what is wrong>`, bench.cli); nothing else may reach stderr.
+
+The commands of a test module run two at a time (the machine has two cores; most of the time is imports).
+"""
+from __future__ import annotations
+
+import hashlib
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from tests.devices import cuda_seen
+
+REPO = Path(__file__).resolve().parents[1]
+PY = sys.executable
+TIMEOUT_S = 300
+
+# README command -> the commands run for it, in order. {py}: this interpreter, {synth}: the synth_root fixture,
+# {tmp}: an empty folder of this test, {repo}: the checkout.
+README_RUNS: dict[str, list[str]] = {
+    "bash run.sh demo": ["bash run.sh demo --help"],
+    "bash run.sh test": ["bash run.sh test --help"],
+    "bash run.sh setup": ["bash run.sh setup"],
+    "bash run.sh test -k reader": ["bash run.sh test -k reader --collect-only -q tests/test_reader.py"],
+    "bash run.sh demo --out /tmp/demo": ["bash run.sh demo --out {tmp}/demo --help"],
+    ".venv/bin/python -m bench.demo": ["{py} -m bench.demo --help"],
+    "python -m bench.demo [--out DIR] [--store DIR]": ["{py} -m bench.demo --help"],
+    "python -m bench": ["{py} -m bench --help"],
+    # sweeps take minutes: composed (experiment, cells, launcher) but not run
+    ".venv/bin/python -m bench -m experiment=table2 hydra/launcher=local":
+        ["{py} -m bench experiment=table2 hydra/launcher=local --cfg all"],
+    ".venv/bin/python -m bench -m experiment=table3 hydra/launcher=local":
+        ["{py} -m bench experiment=table3 hydra/launcher=local --cfg all"],
+    ".venv/bin/python -m bench -m experiment=runtime": ["{py} -m bench experiment=runtime --cfg all"],
+    ".venv/bin/python -m bench -m experiment=table3 hydra/launcher=slurm hydra.launcher.partition=gpu device=cuda "
+    "grid=paper": ["{py} -m bench experiment=table3 hydra/launcher=slurm hydra.launcher.partition=gpu device=cuda "
+                   "grid=paper --cfg all"],
+    ".venv/bin/python -m bench -m experiment=table3 hydra/launcher=submitit_local":
+        ["{py} -m bench experiment=table3 hydra/launcher=submitit_local --cfg all"],
+    r"python -m bench -m experiment=table2\|table3\|runtime [hydra/launcher=local\|slurm\|submitit_local]":
+        ["{py} -m bench experiment=runtime hydra/launcher=submitit_local --cfg all"],
+    # one run, for real (one capture, 2FSK: seconds); the MM-2FSK run is test_app's
+    r"python -m bench dataset.root=DIR method=bp\|2fsk\|3fsk\|mm2fsk freq=CONFIG "
+    r"prior=none\|realsense\|photogrammetry [device=cpu\|cuda] hydra.run.dir=OUT":
+        ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=2fsk freq=d05 "
+         "prior=none device=cpu store.dir=null hydra.run.dir={tmp}/run", "test -s {tmp}/run/results.csv"],
+    ".venv/bin/python -m bench dataset=maroon dataset.root=/data/maroon method=mm2fsk freq=d10 prior=realsense":
+        ["{py} -m bench dataset=maroon dataset.root={synth} method=mm2fsk freq=d10 prior=realsense --cfg job"],
+    ".venv/bin/python -m bench.tables table1 [--csv FILE] [--latex FILE]":
+        ["{py} -m bench.tables table1 --csv {tmp}/t1.csv --latex {tmp}/t1.tex", "test -s {tmp}/t1.tex"],
+    ".venv/bin/python -m bench.tables table2|table3|runtime [--results DIR|CSV] [--csv FILE] [--latex FILE]":
+        ["{py} -m bench.tables table2", "{py} -m bench.tables table3 --csv {tmp}/t3.csv --latex {tmp}/t3.tex",
+         "{py} -m bench.tables runtime --results {repo}/results/table3/results.csv", "test -s {tmp}/t3.csv"],
+    r"python -m bench.tables table1\|table2\|table3\|runtime [--results DIR] [--csv F] [--latex F]":
+        ["{py} -m bench.tables table3 --results {repo}/results/table3"],
+    "python -m bench.tables table3 | head -1": ["{py} -m bench.tables table3 | head -1"],
+    "python -m bench.sweep ROOT --table table3":      # a sweep root made of the committed table3 rows
+        ["mkdir -p {tmp}/sweep/0_job", "cp {repo}/results/table3/results.csv {tmp}/sweep/0_job/",
+         "{py} -m bench.sweep {tmp}/sweep --table table3", "test -s {tmp}/sweep/table3.tex"],
+    "python -m bench.synth --out DIR [--distances 30 40 50] [--objects ...] [--snr-db X] [--seed S]":
+        ["{py} -m bench.synth --help"],     # generating takes ~15 s a capture; bench.synth runs in test_synth_*
+    ".venv/bin/python -m bench.inspect /data/maroon": ["{py} -m bench.inspect {synth}"],
+    "python -m bench.inspect DIR": ["{py} -m bench.inspect {synth}"],
+    ".venv/bin/python -m bench.perf [--device cpu|cuda] [--sizes paper|small]": ["{py} -m bench.perf --help"],
+    ".venv/bin/python -m bench.perf_frames [--device cpu|cuda]": ["{py} -m bench.perf_frames --help"],
+    ".venv/bin/python -m bench.perf_sweep --root data/synthetic [--device cpu|cuda] [--bp-grid capture|small]":
+        ["{py} -m bench.perf_sweep --help"],
+    ".venv/bin/python -m bench.perf --device cuda --out results": ["{py} -m bench.perf --help"],
+    r"python -m bench.perf\|perf_frames\|perf_sweep ... [--out DIR]":
+        ["{py} -m bench.perf --help", "{py} -m bench.perf_frames --help", "{py} -m bench.perf_sweep --help"],
+    "python -m bench.stress [--out DIR]": ["{py} -m bench.stress --help"],
+    ".venv/bin/python -m bench.stress": ["{py} -m bench.stress --help"],
+    ".venv/bin/python -m bench.stress --quick --out /tmp/stress": ["{py} -m bench.stress --help"],   # 30-40 s
+    ".venv/bin/python -m bench.stress --out results/stress": ["{py} -m bench.stress --help"],
+    # measured here on the CPU, merged into a copy of the committed report
+    "python -m bench.stress --precision-only --out /tmp/gpu":
+        ["{py} -m bench.stress --precision-only --quick --out {tmp}/gpu", "test -s {tmp}/gpu/precision.csv"],
+    ".venv/bin/python -m bench.stress --add-precision /tmp/gpu/precision.csv --out results/stress":
+        ["{py} -m bench.stress --precision-only --quick --out {tmp}/gpu", "cp -r {repo}/results/stress {tmp}/report",
+         "{py} -m bench.stress --add-precision {tmp}/gpu/precision.csv --out {tmp}/report",
+         "test -s {tmp}/report/summary.md"],
+    "python -m pytest -m cuda tests/test_correlate.py tests/test_methods_api.py tests/test_gpu_prior_depth.py":
+        ["{py} -m pytest -m cuda --collect-only -q tests/test_correlate.py tests/test_methods_api.py "
+         "tests/test_gpu_prior_depth.py"],
+}
+
+EXIT_USER, EXIT_HYDRA, EXIT_PIPE = 2, 1, 141
+NO_GPU = "device=cuda only fails where Warp sees no GPU"
+# (id, command, exit code, the one stderr line; ending in a space: its beginning). {file}: a regular file,
+# {missing}: a path that does not exist, {empty}: an empty folder, {tmp}: a fresh folder.
+MISTAKES = [
+    ("bench-cuda", "{py} -m bench device=cuda dataset=maroon dataset.root={synth} hydra.run.dir={tmp}/run",
+     EXIT_USER, "error: device=cuda: Warp sees no CUDA device (use device=cpu or device=auto)"),
+    ("bench-device", "{py} -m bench device=gpu dataset=maroon dataset.root={synth} hydra.run.dir={tmp}/run",
+     EXIT_USER, "error: device=gpu: unknown device (choose from cpu, cuda, auto, warp-cpu)"),
+    ("bench-missing-root", "{py} -m bench dataset=maroon dataset.root={missing} hydra.run.dir={tmp}/run",
+     EXIT_USER, "error: {missing}: "),
+    ("bench-run-dir", "{py} -m bench hydra.run.dir={file}/run", EXIT_USER,
+     "error: hydra.run.dir={file}/run: cannot create a directory there: {file} is a file"),
+    ("bench-store", "{py} -m bench dataset=maroon dataset.root={synth} store.dir={file} hydra.run.dir={tmp}/run",
+     EXIT_USER, "error: store.dir={file}: cannot create a directory there: {file} is a file"),
+    ("bench-modes", "{py} -m bench -m experiment=table2 --cfg job", EXIT_USER,
+     "error: python -m bench: --multirun and --cfg cannot be combined (use one of them)"),
+    ("bench-flag", "{py} -m bench --bogus", EXIT_USER,
+     "error: unrecognized arguments: --bogus (see python -m bench --help)"),
+    ("tables-runtime", "{py} -m bench.tables runtime", EXIT_USER,
+     "error: {repo}/results/runtime: no committed results for runtime: run `python -m bench -m experiment=runtime`"
+     " and pass its sweep root with --results DIR"),
+    ("tables-missing", "{py} -m bench.tables table3 --results {missing}", EXIT_USER,
+     "error: {missing}: results path does not exist"),
+    ("tables-not-csv", "{py} -m bench.tables table3 --results {repo}/results/table1.md", EXIT_USER,
+     "error: {repo}/results/table1.md: not a results CSV: no column "),
+    ("tables-empty", "{py} -m bench.tables table2 --results {empty}", EXIT_USER,
+     "error: {empty}: no results.csv and no */results.csv"),
+    ("tables-csv-dir", "{py} -m bench.tables table1 --csv {empty}", EXIT_USER,
+     "error: {empty}: output file is a directory"),
+    ("tables-name", "{py} -m bench.tables tabel3", EXIT_USER,
+     "error: argument table: invalid choice: 'tabel3' (choose from 'table1', 'table2', 'table3', 'runtime') "
+     "(see python -m bench.tables --help)"),
+    ("sweep-missing", "{py} -m bench.sweep {missing}", EXIT_USER, "error: {missing}: sweep root does not exist"),
+    ("sweep-file", "{py} -m bench.sweep {file}", EXIT_USER, "error: {file}: sweep root is not a directory"),
+    ("sweep-empty", "{py} -m bench.sweep {empty}", EXIT_USER, "error: {empty}: no job wrote */results.csv"),
+    ("inspect-missing", "{py} -m bench.inspect {missing}", EXIT_USER, "error: {missing}: "),
+    ("inspect-file", "{py} -m bench.inspect {file}", EXIT_USER, "error: {file}: dataset root is not a directory"),
+    ("inspect-args", "{py} -m bench.inspect", EXIT_USER,
+     "error: the following arguments are required: root (see python -m bench.inspect --help)"),
+    ("synth-object", "{py} -m bench.synth --out {tmp}/synth --objects nope", EXIT_USER,
+     "error: unknown object(s) nope; known: "),
+    ("synth-out", "{py} -m bench.synth --out {file}/synth --objects 01_plate", EXIT_USER,
+     "error: {file}/synth: cannot write the dataset there (Not a directory)"),
+    ("perf-cuda", "{py} -m bench.perf --device cuda --out {tmp}/perf", EXIT_USER,
+     "error: --device cuda: Warp sees no CUDA device (use --device cpu or --device auto)"),
+    ("perf-repeat", "{py} -m bench.perf --repeat 0", EXIT_USER,
+     "error: argument --repeat: must be at least 1, got 0 (see python -m bench.perf --help)"),
+    ("perf-out", "{py} -m bench.perf --sizes small --out {file}", EXIT_USER, "error: {file}: output directory is a file"),
+    ("perf-frames-device", "{py} -m bench.perf_frames --device gpu", EXIT_USER,
+     "error: argument --device: invalid choice: 'gpu' (choose from 'cpu', 'cuda', 'auto') "
+     "(see python -m bench.perf_frames --help)"),
+    ("perf-frames-cuda", "{py} -m bench.perf_frames --device cuda --out {tmp}/perf", EXIT_USER,
+     "error: --device cuda: Warp sees no CUDA device (use --device cpu or --device auto)"),
+    ("perf-sweep-args", "{py} -m bench.perf_sweep", EXIT_USER,
+     "error: the following arguments are required: --root (see python -m bench.perf_sweep --help)"),
+    ("perf-sweep-missing", "{py} -m bench.perf_sweep --root {missing}", EXIT_USER,
+     "error: {missing}: dataset root does not exist"),
+    ("perf-sweep-empty", "{py} -m bench.perf_sweep --root {empty} --out {tmp}/perf", EXIT_USER,
+     "error: {empty}: no captures found (expected folders <object>/<distance_cm>/)"),
+    ("stress-out", "{py} -m bench.stress --quick --out {file}", EXIT_USER, "error: {file}: output directory is a file"),
+    ("stress-csv", "{py} -m bench.stress --add-precision {missing} --out {empty}", EXIT_USER,
+     "error: {missing}: precision CSV does not exist"),
+    ("stress-no-report", "{py} -m bench.stress --add-precision {file} --out {empty}", EXIT_USER,
+     "error: {empty}: no stress report to merge into (missing precision.csv, "),
+    ("stress-not-precision", "{py} -m bench.stress --add-precision {repo}/results/stress/wrapping.csv "
+     "--out {repo}/results/stress", EXIT_USER, "error: {repo}/results/stress/wrapping.csv: not a precision CSV: "),
+    ("stress-modes", "{py} -m bench.stress --precision-only --add-precision x.csv", EXIT_USER,
+     "error: argument --add-precision: not allowed with argument --precision-only (see python -m bench.stress --help)"),
+    ("run-sh-job", "bash run.sh bogus", EXIT_USER,
+     "error: bash run.sh: unknown job 'bogus' (usage: bash run.sh demo|test|setup [args...])"),
+]
+# Hydra's own config errors keep Hydra's wording (the options of the group, several lines) and exit 1.
+# (test_app checks the options listed for a misspelt group.)
+HYDRA_MISTAKES = [("bench-key", "{py} -m bench devcie=cpu", "Could not override 'devcie'")]
+
+
+def readme_commands(text: str) -> set[str]:
+    """The commands the README shows: lines of its ```bash blocks (comments dropped) and the inline code spans of
+    its prose that start with `python -m`, `.venv/bin/python -m` or `bash run.sh`, whitespace collapsed."""
+    commands = set()
+    for block in re.findall(r"```bash\n(.*?)```", text, re.S):
+        for line in block.splitlines():
+            command = re.split(r"\s#\s", line.strip())[0].strip()
+            if command and not command.startswith("#"):
+                commands.add(" ".join(command.split()))
+    prose = re.sub(r"```.*?```", "", text, flags=re.S)
+    for span in re.findall(r"`([^`]+)`", prose):
+        span = " ".join(span.split())
+        if re.match(r"(\.venv/bin/)?python -m |bash run\.sh", span):
+            commands.add(span)
+    return commands
+
+
+def _setup_done() -> bool:
+    """`bash run.sh` would skip its set-up (else it installs: not something a test does)."""
+    stamp = REPO / ".venv" / f".installed-{hashlib.sha256((REPO / 'pyproject.toml').read_bytes()).hexdigest()[:16]}"
+    libusb = subprocess.run("ldconfig -p | grep -q libusb-1.0.so.0", shell=True).returncode == 0
+    return stamp.is_file() and libusb
+
+
+def _run(commands: list[str], paths: dict[str, Path]) -> tuple[int, str, str, str]:
+    """Run commands in order in the checkout, up to the first failure: (exit code, stdout, stderr, command)."""
+    for template in commands:
+        command = template.format(py=shlex.quote(PY), **{k: shlex.quote(str(v)) for k, v in paths.items()})
+        done = subprocess.run(command, shell=True, cwd=REPO, capture_output=True, text=True, timeout=TIMEOUT_S)
+        if done.returncode != 0:
+            break
+    return done.returncode, done.stdout, done.stderr, command
+
+
+def _selected(request, argname: str) -> set[str]:
+    """The parameters of this module's selected tests (so that `-k` runs only what it selects)."""
+    return {item.callspec.params[argname] for item in request.session.items
+            if item.module is request.module and hasattr(item, "callspec") and argname in item.callspec.params}
+
+
+def _paths(base: Path, synth_root: Path) -> dict[str, Path]:
+    base.mkdir(parents=True)
+    (base / "empty").mkdir()
+    (base / "tmp").mkdir()
+    (base / "file.txt").write_text("not what was asked for\n")
+    return {"synth": synth_root, "repo": REPO, "tmp": base / "tmp", "empty": base / "empty",
+            "file": base / "file.txt", "missing": base / "does" / "not" / "exist"}
+
+
+def _run_all(jobs: dict[str, list[str]], base: Path, synth_root: Path) -> dict[str, tuple]:
+    """Each distinct list of commands once, in its own folders, two at a time:
+    name -> ((exit code, stdout, stderr, command), paths)."""
+    distinct = sorted({tuple(commands) for commands in jobs.values()})
+    paths = {commands: _paths(base / str(i), synth_root) for i, commands in enumerate(distinct)}
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        futures = {commands: pool.submit(_run, list(commands), paths[commands]) for commands in distinct}
+        done = {commands: (future.result(), paths[commands]) for commands, future in futures.items()}
+    return {name: done[tuple(commands)] for name, commands in jobs.items()}
+
+
+@pytest.fixture(scope="module")
+def readme_results(request, synth_root, tmp_path_factory):
+    wanted = _selected(request, "command") & set(README_RUNS)
+    if not _setup_done():
+        wanted = {c for c in wanted if not c.startswith("bash run.sh")}
+    return _run_all({c: README_RUNS[c] for c in wanted}, tmp_path_factory.mktemp("readme"), synth_root)
+
+
+@pytest.fixture(scope="module")
+def mistake_results(request, synth_root, tmp_path_factory):
+    wanted = _selected(request, "name")
+    rows = {name: [command] for name, command, *_ in MISTAKES + HYDRA_MISTAKES if name in wanted}
+    return _run_all(rows, tmp_path_factory.mktemp("mistakes"), synth_root)
+
+
+def test_readme_commands_are_all_covered():
+    shown = readme_commands((REPO / "README.md").read_text())
+    assert not shown - set(README_RUNS), "README commands this test does not run (add them to README_RUNS)"
+    assert not set(README_RUNS) - shown, "README_RUNS entries the README no longer shows"
+
+
+@pytest.mark.parametrize("command", sorted(README_RUNS))
+def test_readme_command_runs(command, readme_results):
+    if command not in readme_results:
+        pytest.skip("bash run.sh would install its set-up first")
+    (code, stdout, stderr, ran), _ = readme_results[command]
+    assert code == 0, f"{ran}\n{stdout[-2000:]}\n{stderr[-2000:]}"
+    assert "Traceback" not in stderr, stderr
+
+
+@pytest.mark.parametrize("name", [m[0] for m in MISTAKES])
+def test_mistake_ends_in_one_line(name, mistake_results):
+    _, _, expected_code, expected = next(m for m in MISTAKES if m[0] == name)
+    if "cuda" in name and cuda_seen():
+        pytest.skip(NO_GPU)
+    if name == "tables-runtime" and (REPO / "results" / "runtime").exists():
+        pytest.skip("results/runtime is committed")
+    (code, _, stderr, ran), paths = mistake_results[name]
+    expected = expected.format(**{k: str(v) for k, v in paths.items()})
+    lines = stderr.splitlines()
+    assert code == expected_code, f"{ran}: exit {code}\n{stderr}"
+    assert len(lines) == 1 and lines[0].startswith("error: "), f"{ran}: not one line:\n{stderr}"
+    if expected.endswith(" "):
+        assert lines[0].startswith(expected), f"{ran}:\n{lines[0]}\nexpected to begin with: {expected}"
+    else:
+        assert lines[0] == expected, f"{ran}:\n{lines[0]}\nexpected: {expected}"
+
+
+@pytest.mark.parametrize("name", [m[0] for m in HYDRA_MISTAKES])
+def test_hydra_config_mistake_lists_without_traceback(name, mistake_results):
+    expected = next(m[2] for m in HYDRA_MISTAKES if m[0] == name)
+    (code, _, stderr, ran), _ = mistake_results[name]
+    assert code == EXIT_HYDRA and expected in stderr and "Traceback" not in stderr, f"{ran}:\n{stderr}"
+
+
+@pytest.mark.parametrize("argv", [["bench.tables", "table3"], ["bench", "--help"]])
+def test_closed_stdout_ends_quietly(argv):
+    """`... | head -1`: stdout's reader is gone before the first write; exit 141 (as SIGPIPE), nothing on stderr."""
+    proc = subprocess.Popen([PY, "-m", *argv], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()                  # the reader exits at once (before the command has imported anything)
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=TIMEOUT_S) == EXIT_PIPE, stderr
+    assert stderr == ""
