@@ -110,15 +110,13 @@ def open_checked(path: str | Path, kind: str, roots: tuple[Path, ...] | None = N
 
 
 def read_bytes(path: str | Path, kind: str, roots: tuple[Path, ...] | None = None) -> bytes:
-    """All bytes of a checked regular dataset file, never more than its kind's limit."""
+    """All bytes of a checked regular dataset file (never more than its kind's limit, nor than its size)."""
     path = Path(path)
-    limit_name = KINDS[kind]
-    limit = getattr(current_limits(), limit_name)
-    with open_checked(path, kind, roots) as (handle, _):
+    with open_checked(path, kind, roots) as (handle, size):
         try:
-            data = handle.read(limit + 1)
+            data = handle.read(size + 1)               # allocates what the file holds, not what the limit allows
         except OSError as err:
             raise DatasetError(path, f"cannot read file ({err.strerror or err})") from None
-    if len(data) > limit:
-        raise DatasetError(path, too_large(f"the {kind} file's size in bytes", len(data), limit_name))
+    if len(data) != size:
+        raise DatasetError(path, f"file changed while it was read ({size} bytes expected, {len(data)} read)")
     return data
