@@ -135,6 +135,8 @@ def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str, gt
     else:
         scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
         log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
+    if rec.extra.get("invalid_reason"):       # the method's own account of an all-invalid result, not just 'no valid'
+        scores["failure"] = rec.extra["invalid_reason"]
     row = {"f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
            "runtime_ms": rec.timings_ms["total"], "device": rec.extra.get("device", device),
            "compute_grid_size": "x".join(map(str, rec.grid.size)), **scores}
