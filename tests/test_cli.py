@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.devices import cuda_seen
+from devices import cuda_seen
 
 REPO = Path(__file__).resolve().parents[1]
 PY = sys.executable
@@ -59,7 +59,7 @@ README_RUNS: dict[str, list[str]] = {
         ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=2fsk freq=d05 "
          "prior=none device=cpu store.dir=null hydra.run.dir={tmp}/run", "test -s {tmp}/run/results.csv"],
     ".venv/bin/python -m bench dataset=maroon dataset.root=/data/maroon method=mm2fsk freq=d10 prior=realsense":
-        ["{py} -m bench dataset=maroon dataset.root={synth} method=mm2fsk freq=d10 prior=realsense --cfg job"],
+        ["{py} -m bench dataset=maroon dataset.root=/data/maroon method=mm2fsk freq=d10 prior=realsense --cfg job"],
     ".venv/bin/python -m bench.tables table1 [--csv FILE] [--latex FILE]":
         ["{py} -m bench.tables table1 --csv {tmp}/t1.csv --latex {tmp}/t1.tex", "test -s {tmp}/t1.tex"],
     ".venv/bin/python -m bench.tables table2|table3|runtime [--results DIR|CSV] [--csv FILE] [--latex FILE]":
@@ -103,15 +103,15 @@ NO_GPU = "device=cuda only fails where Warp sees no GPU"
 # (id, command, exit code, the one stderr line; ending in a space: its beginning). {file}: a regular file,
 # {missing}: a path that does not exist, {empty}: an empty folder, {tmp}: a fresh folder.
 MISTAKES = [
-    ("bench-cuda", "{py} -m bench device=cuda dataset=maroon dataset.root={synth} hydra.run.dir={tmp}/run",
+    ("bench-cuda", "{py} -m bench device=cuda dataset=maroon dataset.root={empty} hydra.run.dir={tmp}/run",
      EXIT_USER, "error: device=cuda: Warp sees no CUDA device (use device=cpu or device=auto)"),
-    ("bench-device", "{py} -m bench device=gpu dataset=maroon dataset.root={synth} hydra.run.dir={tmp}/run",
+    ("bench-device", "{py} -m bench device=gpu dataset=maroon dataset.root={empty} hydra.run.dir={tmp}/run",
      EXIT_USER, "error: device=gpu: unknown device (choose from cpu, cuda, auto, warp-cpu)"),
     ("bench-missing-root", "{py} -m bench dataset=maroon dataset.root={missing} hydra.run.dir={tmp}/run",
      EXIT_USER, "error: {missing}: "),
     ("bench-run-dir", "{py} -m bench hydra.run.dir={file}/run", EXIT_USER,
      "error: hydra.run.dir={file}/run: cannot create a directory there: {file} is a file"),
-    ("bench-store", "{py} -m bench dataset=maroon dataset.root={synth} store.dir={file} hydra.run.dir={tmp}/run",
+    ("bench-store", "{py} -m bench dataset=maroon dataset.root={empty} store.dir={file} hydra.run.dir={tmp}/run",
      EXIT_USER, "error: store.dir={file}: cannot create a directory there: {file} is a file"),
     ("bench-modes", "{py} -m bench -m experiment=table2 --cfg job", EXIT_USER,
      "error: python -m bench: --multirun and --cfg cannot be combined (use one of them)"),
@@ -167,6 +167,8 @@ MISTAKES = [
      "--out {repo}/results/stress", EXIT_USER, "error: {repo}/results/stress/wrapping.csv: not a precision CSV: "),
     ("stress-modes", "{py} -m bench.stress --precision-only --add-precision x.csv", EXIT_USER,
      "error: argument --add-precision: not allowed with argument --precision-only (see python -m bench.stress --help)"),
+    ("demo-flag", "{py} -m bench.demo --bogus", EXIT_USER,
+     "error: unrecognized arguments: --bogus (see python -m bench.demo --help)"),
     ("run-sh-job", "bash run.sh bogus", EXIT_USER,
      "error: bash run.sh: unknown job 'bogus' (usage: bash run.sh demo|test|setup [args...])"),
 ]
@@ -224,10 +226,12 @@ def _paths(base: Path, synth_root: Path) -> dict[str, Path]:
             "file": base / "file.txt", "missing": base / "does" / "not" / "exist"}
 
 
-def _run_all(jobs: dict[str, list[str]], base: Path, synth_root: Path) -> dict[str, tuple]:
+def _run_all(jobs: dict[str, list[str]], base: Path, request) -> dict[str, tuple]:
     """Each distinct list of commands once, in its own folders, two at a time:
-    name -> ((exit code, stdout, stderr, command), paths)."""
+    name -> ((exit code, stdout, stderr, command), paths). The synth_root fixture is built only when needed."""
     distinct = sorted({tuple(commands) for commands in jobs.values()})
+    needs_synth = any("{synth}" in command for commands in distinct for command in commands)
+    synth_root = request.getfixturevalue("synth_root") if needs_synth else base / "no-synth-root"
     paths = {commands: _paths(base / str(i), synth_root) for i, commands in enumerate(distinct)}
     with ThreadPoolExecutor(max_workers=2) as pool:
         futures = {commands: pool.submit(_run, list(commands), paths[commands]) for commands in distinct}
@@ -236,18 +240,18 @@ def _run_all(jobs: dict[str, list[str]], base: Path, synth_root: Path) -> dict[s
 
 
 @pytest.fixture(scope="module")
-def readme_results(request, synth_root, tmp_path_factory):
+def readme_results(request, tmp_path_factory):
     wanted = _selected(request, "command") & set(README_RUNS)
     if not _setup_done():
         wanted = {c for c in wanted if not c.startswith("bash run.sh")}
-    return _run_all({c: README_RUNS[c] for c in wanted}, tmp_path_factory.mktemp("readme"), synth_root)
+    return _run_all({c: README_RUNS[c] for c in wanted}, tmp_path_factory.mktemp("readme"), request)
 
 
 @pytest.fixture(scope="module")
-def mistake_results(request, synth_root, tmp_path_factory):
+def mistake_results(request, tmp_path_factory):
     wanted = _selected(request, "name")
     rows = {name: [command] for name, command, *_ in MISTAKES + HYDRA_MISTAKES if name in wanted}
-    return _run_all(rows, tmp_path_factory.mktemp("mistakes"), synth_root)
+    return _run_all(rows, tmp_path_factory.mktemp("mistakes"), request)
 
 
 def test_readme_commands_are_all_covered():
