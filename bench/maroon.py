@@ -31,7 +31,6 @@ from bench.images import read_binary_mask, read_uint16_png
 from bench.jsonio import read_json
 from bench.limits import Limits, current_limits, too_large, use_limits
 from bench.safe_pickle import load_pickled_dict
-from metrics.masks import erosion_kernel_mm, kernel_px_for_pitch
 
 RADAR_FOLDER = "radar_72.0_82.0_128"
 MESH_CANDIDATES = ("mesh_masked_smoothed.obj", "mesh_masked.obj", "mesh_smoothed.obj", "mesh.obj")
@@ -465,6 +464,8 @@ def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, 
 
 def _check_erosion_kernel(capture_dir: Path, metadata: Metadata, grid: RadarGrid) -> None:
     """The P_e / silhouette kernel in pixels of the metric grid (metrics.masks) within `erosion_kernel_px`."""
+    from metrics.masks import erosion_kernel_mm, kernel_px_for_pitch      # (scipy.ndimage: imported when needed)
+
     pitch_mm = 1000.0 * min((hi - lo) / (n - 1) for lo, hi, n in zip(grid.bb_min_m[:2], grid.bb_max_m[:2],
                                                                        grid.size[:2]))
     kernel_px = kernel_px_for_pitch(erosion_kernel_mm(metadata.mask_erosion), pitch_mm)
