@@ -24,7 +24,7 @@ import numpy as np
 
 from bench import cli
 from bench.antennas import load_antenna_array
-from bench.perf_frames import run_frames, write_rows
+from bench.perf_frames import DEFAULT_OUT, run_frames, write_rows
 from methods.correlate import C_M_PER_S, correlate, correlate_reference, correlate_volume
 
 ALL_FREQS_HZ = np.linspace(72e9, 82e9, 128)
@@ -162,9 +162,6 @@ def direct_of_volume(device, signal, freqs_hz, ant, x_m, y_m, z_m, repeat) -> di
     subset = surface_points(len(x_m))[:: max(1, len(x_m) ** 2 // (200 if len(freqs_hz) <= 3 else 20))]
     ms = median_ms(lambda: numpy_direct(signal, freqs_hz, ant.tx_m, ant.rx_m, subset), 1)
     return {"direct_impl": f"numpy plain, {len(subset)} points extrapolated", "direct_ms": ms * n_points / len(subset)}
-
-
-DEFAULT_OUT = Path("outputs/perf")
 
 
 def main(argv=None) -> int:

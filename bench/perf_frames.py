@@ -22,6 +22,7 @@ from methods import reconstruct
 from methods.correlate import C_M_PER_S
 
 FREQS_HZ = np.linspace(72e9, 82e9, 128)
+DEFAULT_OUT = Path("outputs/perf")      # the benchmarks' CSVs (bench.perf, .perf_frames, .perf_sweep); not tracked
 CASES = (("mm2fsk", "d10", "realsense"), ("2fsk", "d05", "none"), ("3fsk", "d05_d10", "none"),
          ("bp", "d05", "none"), ("bp", "full", "none"))
 
@@ -114,7 +115,7 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=cli.positive_int, default=5)
     parser.add_argument("--bp-nz", type=cli.positive_int, default=None,
                         help="BP depth samples run (default: 201 on CUDA, 2 on CPU)")
-    parser.add_argument("--out", type=Path, default=Path("outputs/perf"),
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
                         help="folder for the CSV (default: outputs/perf; `--out results` for the committed figures)")
     args = parser.parse_args(argv)
     device = cli.resolve_device(args.device)

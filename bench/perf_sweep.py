@@ -26,7 +26,7 @@ from bench import cli
 from bench.capture import Capture, RadarGrid
 from bench.grids import grid_for
 from bench.maroon import discover_captures, read_capture
-from bench.perf_frames import write_rows
+from bench.perf_frames import DEFAULT_OUT, write_rows
 from methods import reconstruct
 from methods.api import frequency_indices, prior_image_m
 from methods.mm2fsk import reconstruct_mm2fsk
@@ -150,7 +150,7 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=cli.positive_int, default=3, help="timed calls per cell and capture (median)")
     parser.add_argument("--bp-grid", default="capture", choices=["capture", "small"],
                         help="BP grid: the capture's own (paper, 301x301x201) or configs/grid/bp_cpu.yaml")
-    parser.add_argument("--out", type=Path, default=Path("outputs/perf"),
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
                         help="folder for the CSV (default: outputs/perf; `--out results` for the committed figures)")
     args = parser.parse_args(argv)
     root = cli.existing_path(args.root, "dir", "dataset root")

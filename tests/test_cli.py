@@ -294,6 +294,15 @@ def test_hydra_config_mistake_lists_without_traceback(name, mistake_results):
     assert code == EXIT_HYDRA and expected in stderr and "Traceback" not in stderr, f"{ran}:\n{stderr}"
 
 
+def test_benchmarks_write_under_outputs_by_default():
+    """The tracked results/ is written only when a command is told to (`--out results...`)."""
+    from bench import perf, perf_frames, perf_sweep
+    from bench.stress import __main__ as stress
+
+    for module in (perf, perf_frames, perf_sweep, stress):
+        assert module.DEFAULT_OUT.parts[0] == "outputs", module.__name__
+
+
 @pytest.mark.parametrize("argv", [["bench.tables", "table3"], ["bench", "--help"]])
 def test_closed_stdout_ends_quietly(argv):
     """`... | head -1`: stdout's reader is gone before the first write; exit 141 (as SIGPIPE), nothing on stderr."""
