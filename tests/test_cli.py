@@ -38,7 +38,8 @@ README_RUNS: dict[str, list[str]] = {
     "bash run.sh test -k reader": ["bash run.sh test -k reader --collect-only -q tests/test_reader.py"],
     "bash run.sh demo --out /tmp/demo": ["bash run.sh demo --out {tmp}/demo --help"],
     ".venv/bin/python -m bench.demo": ["{py} -m bench.demo --help"],
-    "python -m bench.demo [--out DIR] [--store DIR]": ["{py} -m bench.demo --help"],
+    "python -m bench.demo [--out DIR] [--store DIR] [--update-results]": ["{py} -m bench.demo --help"],
+    "bash run.sh demo --update-results": ["bash run.sh demo --update-results --help"],
     "python -m bench": ["{py} -m bench --help"],
     # sweeps take minutes: composed (experiment, cells, launcher) but not run
     ".venv/bin/python -m bench -m experiment=table2 hydra/launcher=local":
