@@ -4,6 +4,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from bench.capture import Capture, RadarGrid
+from bench.limits import current_limits
 
 
 def grid_for(capture: Capture, override: Mapping | None) -> RadarGrid:
@@ -13,5 +14,11 @@ def grid_for(capture: Capture, override: Mapping | None) -> RadarGrid:
         return capture.radar.grid
     centre_m = capture.metadata.distance_m
     half_xy, half_z = float(override["xy_half_m"]), float(override["z_half_m"])
+    nxy, nz = int(override["nxy"]), int(override["nz"])
+    limits = current_limits()
+    if nxy < 2 or nz < 1 or nxy * nxy > limits.grid_pixels or nxy * nxy * nz > limits.grid_voxels:
+        raise ValueError(f"grid.override {nxy} x {nxy} x {nz} must have nxy >= 2, nz >= 1 and at most "
+                         f"{limits.grid_pixels:,} pixels and {limits.grid_voxels:,} voxels (BENCH_LIMITS grid_pixels, "
+                         "grid_voxels)")
     return RadarGrid(bb_min_m=(-half_xy, -half_xy, centre_m - half_z), bb_max_m=(half_xy, half_xy, centre_m + half_z),
-                     size=(int(override["nxy"]), int(override["nxy"]), int(override["nz"])))
+                     size=(nxy, nxy, nz))

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import os
 import shutil
 import traceback
@@ -25,6 +26,7 @@ import numpy as np
 from bench import maroon
 from bench.capture import Capture
 from bench.errors import DatasetError
+from bench.stress import hostile_inputs
 from methods import reconstruct
 from methods.frequencies import config_indices
 from methods.mm2fsk import reconstruct_mm2fsk
@@ -103,6 +105,42 @@ FILE_CASES: dict[str, Callable[[Path], None]] = {
     "mesh_truncated": lambda d: _truncate(d / "photogrammetry" / "mesh_masked_smoothed.obj"),
     "mesh_missing": lambda d: shutil.rmtree(d / "photogrammetry"),
 }
+
+
+def _edit_json(relative: str, change: Callable[[dict], None]) -> Callable[[Path], None]:
+    def edit(capture_dir: Path) -> None:
+        path = next(capture_dir.glob(relative))
+        data = json.loads(path.read_text())
+        change(data)
+        path.write_text(json.dumps(data))
+    return edit
+
+
+def _write(relative: str, build: Callable[[], bytes]) -> Callable[[Path], None]:
+    return lambda capture_dir: next(capture_dir.glob(relative)).write_bytes(build())
+
+
+# issue 18's kinds, built by bench.stress.hostile_inputs (the file-system kinds - FIFOs, devices, links - are in
+# tests/test_hostile_fs.py: this in-process chain reads every dataset file to check it is unchanged)
+FILE_CASES.update({
+    "pickle_billion_laughs": _write("radar_*/calibrated_data/000000.npy",
+                                    lambda: hostile_inputs.npy_pickle(hostile_inputs.billion_laughs_pickle())),
+    "pickle_deep_nesting": _write("radar_*/calibrated_data/000000.npy",
+                                  lambda: hostile_inputs.npy_pickle(hostile_inputs.deep_list_pickle(100_000))),
+    "pickle_void_scalar": _write("radar_*/calibrated_data/000000.npy", hostile_inputs.void_scalar_frame),
+    "pickle_zero_stride": _write("radar_*/calibrated_data/000000.npy", hostile_inputs.zero_stride_frame),
+    "pickle_subarray_dtype": _write("radar_*/calibrated_data/000000.npy", hostile_inputs.subarray_dtype_frame),
+    "json_deep_nesting": _write("metadata.json", lambda: b"[" * 100_000 + b"]" * 100_000),
+    "json_5000_digit_int": _write("metadata.json", lambda: hostile_inputs.json_cases()["json_int_5000_digits"]),
+    "grid_bb_max_string": _edit_json("radar_*/calibration.json",
+                                     lambda d: d["000000"]["volume"].update(bb_max=["0.15", 0.15, 0.4])),
+    "grid_1_6e9_pixels": _edit_json("radar_*/calibration.json",
+                                    lambda d: d["000000"]["volume"].update(grid_size=[40000, 40000, 1])),
+    "mask_erosion_4000": _edit_json("metadata.json", lambda d: d.update(mask_erosion=4000)),
+    "depth_png_bomb": _write("realsense/depth/000000.png", lambda: hostile_inputs.png_declaring(20000, 20000)),
+    "transform_scale_1e300": _edit_json("alignment.json", lambda d: d.update(
+        photogrammetry2radar=np.diag([1e300, 1e300, 1e300, 1.0]).tolist())),
+})
 
 
 def _shift_prior_out(capture: Capture) -> Capture:
