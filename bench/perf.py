@@ -1,4 +1,5 @@
-"""Correlation benchmarks: `python -m bench.perf [--device cpu|cuda] [--sizes paper|small] [--repeat N] [--cpu-z N]`.
+"""Correlation benchmarks: `python -m bench.perf [--device cpu|cuda] [--sizes paper|small] [--repeat N] [--cpu-z N]
+[--out DIR] [--no-frames]`.
 
 Cases (paper sizes): MM-2FSK/2FSK (301x301 points on a curved surface, 2 frequencies), 3FSK (3 frequencies),
 BP (301x301x201 voxels, 2 frequencies) and BP_max (128 frequencies). Each case is timed warm (one untimed run
