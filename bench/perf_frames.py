@@ -1,8 +1,9 @@
 """Whole-frame timings of each method through `methods.reconstruct`, at the paper's sizes.
 
 `python -m bench.perf_frames [--device cpu|cuda] [--repeat N] [--bp-nz N] [--out DIR]` (also run by
-`python -m bench.perf`). The frame is built in memory (no file I/O, no Open3D): a tilted plate 0.30-0.34 m seen by a 640x480 depth camera whose every
-pixel is valid, so MM-2FSK's prior covers all 301x301 radar pixels (the worst case of the CPU target <= 0.3 s).
+`python -m bench.perf`). The frame is built in memory (no file I/O, no Open3D): a tilted plate 0.30-0.34 m seen by
+a 640x480 depth camera whose every pixel is valid, so MM-2FSK's prior covers all 301x301 radar pixels (the worst
+case of the CPU target <= 0.3 s).
 BP runs on 301x301 pixels with `--bp-nz` depth samples (201 = the paper's grid; fewer on the CPU, scaled).
 Medians of `--repeat` warm runs, with the per-stage times the methods report. Writes
 OUT/perf_frames_<device>.csv, OUT being `--out` (default outputs/perf/; `--out results` for the committed figures).
