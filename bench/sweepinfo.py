@@ -14,6 +14,7 @@ import math
 import os
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException
 from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig
@@ -39,7 +40,7 @@ class SweepSize(Callback):
         try:
             os.environ[JOBS_ENV] = str(count_jobs(dict(config.hydra.sweeper.get("params") or {}),
                                                   list(config.hydra.overrides.task)))
-        except Exception:    # noqa: BLE001 - e.g. a glob sweep; the count only decorates progress lines
+        except HydraException:    # e.g. a glob sweep (needs the config loader): progress lines say '?'
             os.environ.pop(JOBS_ENV, None)
 
 

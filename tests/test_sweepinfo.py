@@ -6,7 +6,7 @@ from hydra.types import RunMode
 from omegaconf import OmegaConf
 
 from bench.app import synthetic_asked
-from bench.sweepinfo import JOBS_ENV, count_jobs, timing_mode
+from bench.sweepinfo import JOBS_ENV, SweepSize, count_jobs, sweep_jobs, timing_mode
 
 JOBLIB = "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher"
 SLURM = "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher"
@@ -59,3 +59,10 @@ def test_joblib_with_every_core_is_parallel_on_a_multicore_machine(monkeypatch):
 ])
 def test_synthetic_data_is_generated_only_where_asked(overrides, asked):
     assert synthetic_asked(overrides) is asked
+
+
+def test_an_uncountable_sweep_leaves_the_job_count_unknown(monkeypatch):
+    monkeypatch.setenv(JOBS_ENV, "7")                                        # from an earlier sweep
+    config = OmegaConf.create({"hydra": {"sweeper": {"params": {"cell": "glob(*)"}}, "overrides": {"task": []}}})
+    SweepSize().on_multirun_start(config)
+    assert sweep_jobs() is None
