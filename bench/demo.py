@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import itertools
 import shutil
 import subprocess
 import sys
@@ -47,7 +48,7 @@ def generate_dataset(root: Path) -> None:
     settings = OmegaConf.load(CONFIG_DIR / "dataset" / "synthetic.yaml").generate
     objects = list(CATALOGUE) if settings.objects is None else list(settings.objects)
     distances = list(settings.distances)
-    total, done = len(objects) * len(distances), iter(range(1, len(objects) * len(distances) + 1))
+    total, done = len(objects) * len(distances), itertools.count(1)
     print(f"synthetic dataset {root}: {total} captures", flush=True)
 
     def log(result) -> None:
