@@ -1,7 +1,8 @@
 """The hostile kinds through the real entry points, as a user runs them: `python -m bench` and `python -m
 bench.inspect` in subprocesses capped at 3 GiB of address space and 90 s each. Every case ends in exactly one line
 `error: <the file>: <what is wrong>` and exit 2 (inspect: one `!!` problem line naming the file, exit 1), the
-dataset stays byte-identical and nothing is executed; valid data beside hostile names still gives its row.
+dataset stays byte-identical and nothing is executed; valid data beside hostile names still gives its row, and
+a forged generator manifest makes nothing be written.
 
 The commands run two at a time (the machine has 2 cores; each is mostly interpreter start-up) in one module
 fixture; the tests then read their results."""
@@ -92,6 +93,12 @@ def runs(synth_capture, tmp_path_factory):
     copy_capture(source, names, distance="3\u00b3")
     copy_capture(source, names, object_name="04_w\u00fcrfel")
     jobs["names"], roots["names"] = _bench(names, base / "out" / "names"), names
+    forged = base / "forged_root"                                    # a dataset with a forged generator manifest
+    copy_capture(source, forged)
+    (forged / "synth_manifest.json").write_text(json.dumps({"captures": {}}))
+    jobs["forged"] = ["dataset=synthetic" if arg == "dataset=maroon" else arg
+                      for arg in _bench(forged, base / "out" / "forged")]
+    roots["forged"] = forged
     before = {name: tree_digest(root) for name, root in roots.items()}
     with ThreadPoolExecutor(max_workers=2) as pool:
         results = dict(zip(jobs, pool.map(run_capped, jobs.values())))
@@ -145,3 +152,13 @@ def test_valid_data_beside_unrepresentable_names_still_gives_its_row(runs):
     for skipped in ("01\\nplate: skipped", "02_pl\\xffte: skipped", "3\u00b3: skipped"):
         assert skipped in output, output
     assert runs["after"]["names"] == runs["before"]["names"]
+
+
+def test_a_forged_manifest_makes_python_m_bench_read_not_write(runs):
+    """`dataset=synthetic dataset.root=<a dataset holding a forged synth_manifest.json>`: nothing is generated (the
+    issue saw 25 paths changed), the capture there is read as it is."""
+    result = runs["results"]["forged"]
+    assert result.returncode == 0, result.stderr
+    assert "generating nothing" in result.stdout + result.stderr
+    assert len((runs["base"] / "out" / "forged" / "results.csv").read_text().splitlines()) == 2
+    assert runs["after"]["forged"] == runs["before"]["forged"]

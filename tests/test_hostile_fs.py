@@ -1,10 +1,12 @@
 """The file system as an attacker shapes it: FIFOs (which would block forever), devices (`/dev/zero` never ends),
 sockets, folders where files belong, symbolic links out of the dataset or in a loop, and folder names with a
-newline, bytes that are not UTF-8 or superscript digits. Each ends in one DatasetError naming the path (or a
+newline, bytes that are not UTF-8 or superscript digits, and a forged generator manifest. Each ends in one DatasetError naming the path (or a
 warning and a skip, for names), under a time cap (a FIFO that blocks fails the test instead of hanging it); valid
 data - links inside the dataset, a capture folder linked from another disk, accented names - still reads."""
 from __future__ import annotations
 
+import dataclasses
+import json
 import logging
 import os
 import socket
@@ -15,6 +17,8 @@ import pytest
 from bench import maroon
 from bench.errors import DatasetError
 from bench.store import Store, capture_files
+from bench.synth import SynthConfig, generate_capture
+from bench.synth.ownership import ForeignRootError
 from hostile_tools import (RADAR, bounded, copy_capture, frame_file, replace_with_fifo, replace_with_link,
                            tree_digest)
 
@@ -159,3 +163,40 @@ def test_accented_and_wide_names_are_valid_data(source_capture, tmp_path):
     copy_capture(source_capture, tmp_path / "root", object_name="01_w\u00fcrfel_\u7acb\u65b9")
     (found,) = maroon.discover_captures(tmp_path / "root")
     assert maroon.read_capture(found, parts=()).object_name == "01_w\u00fcrfel_\u7acb\u65b9"
+
+
+# ------------------------------------------------------------------------------- forged generator manifest
+def _forged_root(source_capture, tmp_path, manifest: dict) -> Path:
+    root = tmp_path / "real_dataset"
+    copy_capture(source_capture, root)
+    (root / "synth_manifest.json").write_text(json.dumps(manifest))
+    return root
+
+
+@pytest.mark.parametrize("manifest, extra, message", [
+    ({"captures": {}}, None, "does not list"),                              # the issue's forged manifest
+    ({"captures": {"01_plate/30": {"hash": "x"}}}, "README.txt", "did not write"),
+    ({"captures": []}, None, "lists no captures"),
+    ({"captures": {}}, ".synth.lock->/etc/hostname", "synth.lock"),          # its lock forged as a link
+])
+def test_a_forged_manifest_grants_no_write(source_capture, tmp_path, manifest, extra, message):
+    root = _forged_root(source_capture, tmp_path, manifest)
+    if extra == "README.txt":
+        (root / "README.txt").write_text("the real dataset")
+    elif extra:
+        (root / ".synth.lock").symlink_to("/etc/hostname")
+    before = tree_digest(root)
+    with pytest.raises(ForeignRootError, match=message), bounded(seconds=60):
+        generate_capture(root, "03_sphere", 30, dataclasses.replace(SynthConfig(), frequency_points=16))
+    assert tree_digest(root) == before                                      # not even a lock file
+
+
+def test_a_manifest_linked_from_outside_is_not_trusted(source_capture, tmp_path):
+    root = _forged_root(source_capture, tmp_path, {"captures": {"01_plate/30": {}}})
+    outside = tmp_path / "manifest.json"
+    (root / "synth_manifest.json").rename(outside)
+    (root / "synth_manifest.json").symlink_to(outside)
+    before = tree_digest(root)
+    with pytest.raises(ForeignRootError, match="outside the dataset root"), bounded(seconds=60):
+        generate_capture(root, "01_plate", 30, dataclasses.replace(SynthConfig(), frequency_points=16), force=True)
+    assert tree_digest(root) == before

@@ -9,6 +9,10 @@ root look foreign.
 
 Writers serialise on an exclusive flock of `<root>/.synth.lock`: parallel sweep jobs that all ask for the same
 captures wait for the first one and then find them cached.
+
+A manifest is trusted only if it accounts for what is on disk (verify_manifest, run under the lock on entering
+`exclusive`, where no generator is between writing a capture and recording it): a manifest forged into a real
+dataset grants no permission to write there.
 """
 from __future__ import annotations
 
@@ -17,6 +21,7 @@ import fcntl
 import json
 import os
 import re
+import stat
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -65,10 +70,53 @@ def claim(root: Path) -> None:
         handle.write(json.dumps({"captures": {}}))
 
 
+def verify_manifest(root: Path) -> None:
+    """ForeignRootError unless the manifest of `root` accounts for everything on disk: it is a regular file inside
+    the root (bounded JSON, bench.safe_io) of the form {"captures": {"<object>/<distance>": {...}}}, every capture
+    folder `<object>/<distance>` is one it lists, and nothing else but generator leftovers is there."""
+    from bench.jsonio import loads_bounded
+    from bench.safe_io import read_bytes
+
+    path = root / MANIFEST_NAME
+    try:
+        captures = loads_bounded(path, read_bytes(path, "json", roots=(Path(os.path.realpath(root)),)))
+        captures = captures.get("captures") if isinstance(captures, dict) else None
+    except DatasetError as err:
+        raise ForeignRootError(root, f"its {MANIFEST_NAME} is not the generator's ({err.problem}); not writing") \
+            from None
+    if not isinstance(captures, dict):
+        raise ForeignRootError(root, f"its {MANIFEST_NAME} lists no captures; not writing")
+    for entry in root.iterdir():
+        if entry.name == MANIFEST_NAME or entry.name.startswith(".synth"):
+            continue
+        if entry.name.startswith(".") or not entry.is_dir() or entry.is_symlink():
+            raise ForeignRootError(root, f"holds {entry.name!r}, which the generator did not write; not writing")
+        for folder in entry.iterdir():
+            if not TEMP_FOLDER.match(folder.name) and f"{entry.name}/{folder.name}" not in captures:
+                raise ForeignRootError(root, f"holds {entry.name}/{folder.name}, which its {MANIFEST_NAME} does not "
+                                             "list (a forged manifest, or a run killed between writing a capture "
+                                             "and recording it: delete that folder); not writing")
+
+
 @contextlib.contextmanager
 def exclusive(root: Path, on_wait: Callable[[], None] | None = None) -> Iterator[None]:
-    """Hold the root's generator lock (blocking); `on_wait()` is called once if another process holds it."""
-    with open(root / LOCK_NAME, "a") as lock:
+    """Hold the root's generator lock (blocking); `on_wait()` is called once if another process holds it. Under
+    the lock, the manifest is verified against the disk first (verify_manifest); where no lock file exists yet (no
+    generator has worked here, so none is between writing and recording a capture) it is verified before the lock
+    file is created, so a foreign root is left without a single new file. The lock file must be a regular file
+    (a link or FIFO in its place is refused)."""
+    lock_path = root / LOCK_NAME
+    if not (lock_path.exists() or lock_path.is_symlink()):
+        verify_manifest(root)
+    try:
+        fd = os.open(lock_path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+    except OSError as err:
+        raise ForeignRootError(root, f"cannot use {LOCK_NAME} as the generator's lock ({err.strerror}); not "
+                                     "writing") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise ForeignRootError(root, f"its {LOCK_NAME} is not a regular file; not writing")
+    with os.fdopen(fd, "a") as lock:
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -76,6 +124,7 @@ def exclusive(root: Path, on_wait: Callable[[], None] | None = None) -> Iterator
                 on_wait()
             fcntl.flock(lock, fcntl.LOCK_EX)
         try:
+            verify_manifest(root)
             yield
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
