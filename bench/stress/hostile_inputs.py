@@ -234,8 +234,10 @@ PICKLE_CASES = {
 def npy_header_cases() -> dict[str, bytes]:
     nested = "{'descr': '|O', 'fortran_order': False, 'shape': " + "(" * 3000 + ")" * 3000 + ", }"
     unary = "{'descr': '|O', 'fortran_order': False, 'shape': (" + "-" * 3000 + "1,), }"
+    within = "{'descr': '|O', 'fortran_order': False, 'shape': " + "(" * 1800 + ")" * 1800 + ", }"
     return {
         "header_nested_parentheses": npy_with_header(nested, b""),
+        "header_nested_within_length_limit": npy_with_header(within, b""),
         "header_unary_chain": npy_with_header(unary, b""),
         "header_length_2e31": b"\x93NUMPY\x02\x00" + struct.pack("<I", 1 << 31) + b"{",
         "header_numeric_huge_shape": npy_with_header("{'descr': '<c16', 'fortran_order': False, "
