@@ -29,6 +29,10 @@ REPO = Path(__file__).resolve().parents[1]
 PY = sys.executable
 TIMEOUT_S = 300
 
+STRESS_PRECISION = ["{py} -m bench.stress --precision-only --quick --out {tmp}/gpu",
+                    "cp -r {repo}/results/stress {tmp}/report",
+                    "{py} -m bench.stress --add-precision {tmp}/gpu/precision.csv --out {tmp}/report",
+                    "test -s {tmp}/report/summary.md"]
 # README command -> the commands run for it, in order. {py}: this interpreter, {synth}: the synth_root fixture,
 # {tmp}: an empty folder of this test, {repo}: the checkout.
 README_RUNS: dict[str, list[str]] = {
@@ -88,13 +92,9 @@ README_RUNS: dict[str, list[str]] = {
     ".venv/bin/python -m bench.stress": ["{py} -m bench.stress --help"],
     ".venv/bin/python -m bench.stress --quick --out /tmp/stress": ["{py} -m bench.stress --help"],   # 30-40 s
     ".venv/bin/python -m bench.stress --out results/stress": ["{py} -m bench.stress --help"],
-    # measured here on the CPU, merged into a copy of the committed report
-    "python -m bench.stress --precision-only --out /tmp/gpu":
-        ["{py} -m bench.stress --precision-only --quick --out {tmp}/gpu", "test -s {tmp}/gpu/precision.csv"],
-    ".venv/bin/python -m bench.stress --add-precision /tmp/gpu/precision.csv --out results/stress":
-        ["{py} -m bench.stress --precision-only --quick --out {tmp}/gpu", "cp -r {repo}/results/stress {tmp}/report",
-         "{py} -m bench.stress --add-precision {tmp}/gpu/precision.csv --out {tmp}/report",
-         "test -s {tmp}/report/summary.md"],
+    # measured here on the CPU (quick sizes), merged into a copy of the committed report; the two commands in one
+    "python -m bench.stress --precision-only --out /tmp/gpu": STRESS_PRECISION,
+    ".venv/bin/python -m bench.stress --add-precision /tmp/gpu/precision.csv --out results/stress": STRESS_PRECISION,
     "python -m pytest -m cuda tests/test_correlate.py tests/test_methods_api.py tests/test_gpu_prior_depth.py":
         ["{py} -m pytest -m cuda --collect-only -q tests/test_correlate.py tests/test_methods_api.py "
          "tests/test_gpu_prior_depth.py"],
@@ -134,7 +134,6 @@ MISTAKES = [
      "error: argument table: invalid choice: 'tabel3' (choose from 'table1', 'table2', 'table3', 'runtime') "
      "(see python -m bench.tables --help)"),
     ("sweep-missing", "{py} -m bench.sweep {missing}", EXIT_USER, "error: {missing}: sweep root does not exist"),
-    ("sweep-file", "{py} -m bench.sweep {file}", EXIT_USER, "error: {file}: sweep root is not a directory"),
     ("sweep-empty", "{py} -m bench.sweep {empty}", EXIT_USER, "error: {empty}: no job wrote */results.csv"),
     ("inspect-missing", "{py} -m bench.inspect {missing}", EXIT_USER, "error: {missing}: "),
     ("inspect-file", "{py} -m bench.inspect {file}", EXIT_USER, "error: {file}: dataset root is not a directory"),
