@@ -3,9 +3,10 @@
 Before Hydra starts, its command line is checked with Hydra's own parser made one-line (an unknown flag, or two
 of -m/--cfg/--info/--run/--shell-completion, which Hydra reports with a usage dump or a traceback), and an
 explicit `hydra.run.dir=` (with -m: `hydra.sweep.dir=`) that cannot be created ends in one line (Hydra would print
-a traceback). A closed stdout or Ctrl-C end quietly (bench.cli). Hydra's own messages for config mistakes (an
-unknown option of a group, with the list of options) are left as Hydra words them.
+a traceback). A closed stdout (`python -m bench ... | head -1`) or Ctrl-C end quietly (bench.cli). Hydra's own
+messages for config mistakes (an unknown option of a group, with the list of options) are left as Hydra words them.
 """
+import logging
 import sys
 
 from bench import cli
@@ -33,6 +34,7 @@ def check_command_line(argv: list[str]) -> None:
 
 
 def _main() -> None:
+    logging.raiseExceptions = False    # a log line to a closed stdout is dropped, not a '--- Logging error ---' dump
     check_command_line(sys.argv[1:])
     from bench.app import main
 

@@ -238,6 +238,8 @@ def main(cfg: DictConfig) -> None:
         rows = run(cfg, out_dir, generate=synthetic_asked(list(hydra_cfg.overrides.task)),
                    timing=timing_mode(hydra_cfg))
         print(progress_line(cfg, hydra_cfg, rows, time.perf_counter() - started), flush=True)
+    except BrokenPipeError:    # stdout closed (`... | head`): quiet exit 141, not Hydra's traceback
+        cli.exit_on_closed_stdout()
     except MissingMandatoryValue as err:
         cli.fail(f"the setting '{err.full_key}' is required (e.g. {err.full_key}=/path/to/maroon)")
     except ValueError as err:  # invalid combination of method, frequencies and prior

@@ -305,9 +305,16 @@ def test_benchmarks_write_under_outputs_by_default():
         assert module.DEFAULT_OUT.parts[0] == "outputs", module.__name__
 
 
-@pytest.mark.parametrize("argv", [["bench.tables", "table3"], ["bench", "--help"]])
-def test_closed_stdout_ends_quietly(argv):
-    """`... | head -1`: stdout's reader is gone before the first write; exit 141 (as SIGPIPE), nothing on stderr."""
+@pytest.mark.parametrize("argv", [["bench.tables", "table3"], ["bench", "--help"],
+                                  ["bench", "dataset=maroon", "dataset.root={synth}", "dataset.captures=[01_plate/30]",
+                                   "method=2fsk", "freq=d05", "prior=none", "store.dir=null", "hydra.run.dir={tmp}"]],
+                         ids=["tables", "bench-help", "bench-run"])
+def test_closed_stdout_ends_quietly(argv, request, tmp_path):
+    """`... | head -1`: stdout's reader is gone before the first write (for a run: its log lines and its progress
+    line, inside Hydra's job); exit 141 (as SIGPIPE), nothing on stderr."""
+    if any("{synth}" in arg for arg in argv):
+        paths = {"synth": request.getfixturevalue("synth_root"), "tmp": tmp_path / "run"}
+        argv = [arg.format(**paths) for arg in argv]
     proc = subprocess.Popen([PY, "-m", *argv], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     proc.stdout.close()                  # the reader exits at once (before the command has imported anything)
     stderr = proc.stderr.read().decode()
