@@ -324,6 +324,8 @@ def _intrinsics(path: Path, entry) -> CameraIntrinsics:
         _number(path, value, f"rgb.{key}")
     if values["fx"] <= 0 or values["fy"] <= 0 or values["width"] < 1 or values["height"] < 1:
         raise DatasetError(path, "rgb focal lengths and image size must be positive")
+    if not all(1e-3 <= values[k] <= 1e6 for k in ("fx", "fy")) or not all(abs(values[k]) <= 1e6 for k in ("cx", "cy")):
+        raise DatasetError(path, "rgb focal lengths must lie in 1e-3..1e6 pixels and cx, cy within 1e6 pixels")
     return CameraIntrinsics(fx=float(values["fx"]), fy=float(values["fy"]), cx=float(values["cx"]),
                             cy=float(values["cy"]), width=int(values["width"]), height=int(values["height"]))
 

@@ -110,6 +110,17 @@ def test_metadata_values_are_checked(capture, change, message):
     _read_fails(capture, "metadata.json", message)
 
 
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d["rgb"].update(fx=1e-300), "focal lengths"),
+    (lambda d: d["rgb"].update(cy=1e300), "focal lengths"),
+    (lambda d: d["rgb"].update(width="640"), "must be a number"),
+    (lambda d: d.update(capture={"scale": 10 ** 50}), "capture.scale"),
+])
+def test_camera_values_are_checked(capture, change, message):
+    _edit(capture, "realsense/calibration.json", change)
+    _read_fails(capture, "realsense/calibration.json", message)
+
+
 def test_an_erosion_kernel_beyond_the_limit_on_a_fine_grid_names_metadata(capture):
     """mask_erosion 200 is 50 mm; on a grid of 0.1 mm pixels that is a 500-pixel kernel (limit 64)."""
     _edit(capture, "metadata.json", lambda d: d.update(mask_erosion=200))
