@@ -82,3 +82,30 @@ def test_a_root_with_other_data_is_refused_and_left_untouched(tmp_path):
     with pytest.raises(ForeignRootError, match="generator did not write"):
         generate_catalogue(root, [30], ["01_plate"], FAST)
     assert sorted(root.rglob("*")) == before                                  # not even a lock file
+
+
+def test_a_manifest_naming_existing_captures_never_lets_them_be_overwritten(tmp_path):
+    """A manifest that lists the real captures by name (with a stale hash) grants no right to replace them: only a
+    capture byte for byte as the generator recorded it is regenerated."""
+    root = tmp_path / "root"
+    generate_catalogue(root, [30], ["01_plate"], FAST)
+    manifest_path = root / "synth_manifest.json"
+    manifest = json.loads(manifest_path.read_text())
+    manifest["captures"]["01_plate/30"]["hash"] = "stale"
+    manifest_path.write_text(json.dumps(manifest))
+    assert generate_catalogue(root, [30], ["01_plate"], FAST)[0].status == "generated"   # ours: replaced
+
+    manifest = json.loads(manifest_path.read_text())
+    manifest["captures"]["01_plate/30"]["hash"] = "stale"
+    manifest_path.write_text(json.dumps(manifest))
+    metadata = root / "01_plate" / "30" / "metadata.json"
+    metadata.write_text(metadata.read_text().replace("metal plate", "someone's plate"))    # no longer the generator's
+    before = _capture_files(root)
+    with pytest.raises(ForeignRootError, match="not byte for byte"):
+        generate_catalogue(root, [30], ["01_plate"], FAST)
+    assert _capture_files(root) == before
+    del manifest["captures"]["01_plate/30"]["content"]                  # an entry without the content digest
+    manifest_path.write_text(json.dumps(manifest))
+    with pytest.raises(ForeignRootError, match="not overwriting"):
+        generate_catalogue(root, [30], ["01_plate"], FAST)
+    assert _capture_files(root) == before

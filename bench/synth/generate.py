@@ -146,8 +146,11 @@ def _ensure_locked(root: Path, object_name: str, distance_cm: int, config: Synth
     target = root / object_name / str(int(distance_cm))
     key, digest = f"{object_name}/{int(distance_cm)}", capture_hash(config, object_name, distance_cm)
     manifest = _Manifest(root)
-    if not force and target.is_dir() and manifest.read().get(key, {}).get("hash") == digest:
+    recorded = manifest.read().get(key, {})
+    if not force and target.is_dir() and recorded.get("hash") == digest:
         return CaptureResult(target, "cached", time.perf_counter() - start)
+    if target.exists():
+        ownership.check_replaceable(target, recorded)
     target.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(target.parent, distance_cm)
     token = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
@@ -164,7 +167,8 @@ def _ensure_locked(root: Path, object_name: str, distance_cm: int, config: Synth
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     seconds = time.perf_counter() - start
-    manifest.record(key, {"hash": digest, "config": config.to_dict(), "seconds": round(seconds, 3)})
+    manifest.record(key, {"hash": digest, "config": config.to_dict(), "seconds": round(seconds, 3),
+                          "content": ownership.content_digest(target)})
     return CaptureResult(target, "generated", seconds)
 
 

@@ -130,6 +130,47 @@ def exclusive(root: Path, on_wait: Callable[[], None] | None = None) -> Iterator
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
+CONTENT_LIMIT_BYTES = 1 << 30     # a synthetic capture is ~40 MB; more is not the generator's
+
+
+def content_digest(folder: Path) -> str | None:
+    """sha256 over the relative paths and bytes of every file under `folder` (sorted), or None when the folder
+    holds anything the generator never writes (a link, a FIFO, a device, more than CONTENT_LIMIT_BYTES): what
+    the manifest records per capture, so that a capture is replaced only while it is still the generator's."""
+    import hashlib
+
+    entries, total = [], 0
+    for path in sorted(folder.rglob("*")):
+        mode = path.lstat().st_mode
+        if stat.S_ISDIR(mode):
+            continue
+        if not stat.S_ISREG(mode):
+            return None
+        total += path.lstat().st_size
+        if total > CONTENT_LIMIT_BYTES:
+            return None
+        entries.append(path)
+    digest = hashlib.sha256()
+    for path in entries:
+        digest.update(path.relative_to(folder).as_posix().encode() + b"\0")
+        with open(path, "rb", opener=lambda name, flags: os.open(name, flags | os.O_NOFOLLOW | os.O_NONBLOCK)) as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        digest.update(b"\0")
+    return digest.hexdigest()
+
+
+def check_replaceable(capture_dir: Path, recorded: dict) -> None:
+    """ForeignRootError unless the capture on disk is byte for byte what the manifest says the generator wrote:
+    a manifest entry alone (forged, or from a generator that recorded no content) never lets an existing
+    capture be overwritten."""
+    expected = recorded.get("content") if isinstance(recorded, dict) else None
+    if expected is None or content_digest(capture_dir) != expected:
+        raise ForeignRootError(capture_dir, "is not byte for byte the capture the generator recorded in "
+                                            f"{MANIFEST_NAME} (changed, or not the generator's); not overwriting "
+                                            "it (delete the folder to regenerate it)")
+
+
 def pid_alive(pid: int) -> bool:
     """Whether a process with this id exists on this machine (a temp folder's owner)."""
     try:
