@@ -99,9 +99,16 @@ def _container(node):
     return None if node is None else OmegaConf.to_container(node)
 
 
+def _roi(cfg: DictConfig) -> str | dict:
+    """The cell's skips and region of interest (configs/roi/, methods.skips): the `roi` group's settings, or the
+    methods' default ('auto') where the config has no `roi` group."""
+    node = OmegaConf.select(cfg, "roi", default=None)
+    return "auto" if node is None else OmegaConf.to_container(node)
+
+
 def _cell(cfg: DictConfig, device: str) -> dict:
     """Everything but the capture that determines a cell's result (the store key's configuration part)."""
-    return {"method": cfg.method.name, "params": OmegaConf.to_container(cfg.method.params),
+    return {"method": cfg.method.name, "params": OmegaConf.to_container(cfg.method.params), "roi": _roi(cfg),
             "f_ghz": _container(cfg.freq.f_ghz), "prior": cfg.prior.name,
             "scalar_prior_m": float(cfg.prior.scalar_m), "grid": _container(cfg.grid.override),
             "threshold_db": float(cfg.threshold_db), "frame": int(cfg.dataset.frame),
@@ -126,7 +133,7 @@ def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str, gt
 
     targets_ghz = None if cfg.freq.f_ghz is None else [float(f) for f in cfg.freq.f_ghz]
     rec = methods.reconstruct(capture, method=cfg.method.name, freq=targets_ghz, prior=cfg.prior.name,
-                              scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid,
+                              scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
                               threshold_db=float(cfg.threshold_db), **OmegaConf.to_container(cfg.method.params))
     metric_grid = capture.radar.grid
     depth_m = resample_depth_m(rec.depth_m, rec.grid, metric_grid)
@@ -139,7 +146,7 @@ def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str, gt
         scores["failure"] = rec.extra["invalid_reason"]
     row = {"f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
            "runtime_ms": rec.timings_ms["total"], "device": rec.extra.get("device", device),
-           "compute_grid_size": "x".join(map(str, rec.grid.size)), **scores}
+           "compute_grid_size": "x".join(map(str, rec.grid.size)), "roi_px": rec.extra.get("roi_px"), **scores}
     row.update({f"t_{stage}_ms": ms for stage, ms in rec.timings_ms.items() if stage != "total"})
     arrays = {"depth_m": depth_m, "magnitude": resample_nearest(rec.magnitude, rec.grid, metric_grid),
               "gt_depth_m": gt_depth_m}

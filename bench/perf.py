@@ -1,5 +1,6 @@
 """Correlation benchmarks: `python -m bench.perf [--device cpu|cuda] [--sizes paper|small] [--repeat N] [--cpu-z N]
-[--out DIR] [--no-frames]`.
+[--out DIR] [--no-frames]`; `python -m bench.perf --section skips [...]`: every skip of methods.skips off and on
+per catalogue object (bench.perf_skips).
 
 Cases (paper sizes): MM-2FSK/2FSK (301x301 points on a curved surface, 2 frequencies), 3FSK (3 frequencies),
 BP (301x301x201 voxels, 2 frequencies) and BP_max (128 frequencies). Each case is timed warm (one untimed run
@@ -17,6 +18,7 @@ default outputs/perf/ (`--out results` refreshes the committed figures).
 """
 from __future__ import annotations
 
+import argparse
 import statistics
 import time
 from pathlib import Path
@@ -166,6 +168,13 @@ def direct_of_volume(device, signal, freqs_hz, ant, x_m, y_m, z_m, repeat) -> di
 
 
 def main(argv=None) -> int:
+    section = argparse.ArgumentParser(add_help=False)
+    section.add_argument("--section", default="correlation", choices=["correlation", "skips"])
+    known, rest = section.parse_known_args(argv)
+    if known.section == "skips":          # every skip off and on per catalogue object (bench.perf_skips)
+        from bench import perf_skips
+        return perf_skips.main(rest)
+    argv = rest
     parser = cli.ArgumentParser(prog="python -m bench.perf", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto"])
     parser.add_argument("--sizes", default="paper", choices=sorted(SIZES))

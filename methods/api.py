@@ -3,6 +3,11 @@
 It selects the configuration's frequencies from the loaded radar frame, builds the prior, checks the combination
 and runs one method. Timings exclude file I/O (the capture is already in memory) and one-time kernel
 compilation (a tiny warm-up call runs first on Warp devices).
+
+`roi` picks the skips (methods.skips: 'auto' = those measured to agree with the full computation, 'none' = the
+full computation of every method, 'all', or a mapping of settings) and the region of interest they use
+(methods.roi: the capture's metadata mask_bb, the prior, a coarse pass). `extra["roi_px"]` is the number of pixels
+the method evaluated (its last stage).
 """
 from __future__ import annotations
 
@@ -20,6 +25,8 @@ from methods.fsk3 import reconstruct_3fsk
 from methods.mm2fsk import reconstruct_mm2fsk
 from methods.prior import mesh_prior_m, realsense_prior_m
 from methods.reconstruction import Reconstruction
+from methods.roi import Roi, full_roi, intersect, roi_from_mask_bb
+from methods.skips import SkipSettings, resolve
 from methods.timing import StageTimer
 
 METHODS = ("bp", "2fsk", "3fsk", "mm2fsk")
@@ -117,6 +124,18 @@ def _check_signal(capture: Capture, signal: np.ndarray) -> None:
         raise ValueError(f"the radar frame of capture {capture.name} has NaN or Inf samples")
 
 
+def capture_roi(capture: Capture, grid: RadarGrid, skips: SkipSettings) -> Roi:
+    """The ROI the capture itself gives before any pass: its metadata mask_bb's x/y bounds (`skips.mask_bb`) and z
+    bounds (`skips.mask_bb_depth`) (methods.roi), else the whole grid. The prior's footprint and the coarse pass narrow it inside the methods."""
+    roi = full_roi(grid)
+    bounds = capture.metadata.mask_bb_m
+    if skips.mask_bb:
+        roi = intersect(roi, roi_from_mask_bb({k: v for k, v in bounds.items() if k[0] in "xy"}, grid))
+    if skips.mask_bb_depth:
+        roi = intersect(roi, roi_from_mask_bb({k: v for k, v in bounds.items() if k[0] == "z"}, grid))
+    return roi
+
+
 _warmed_up: set[tuple[str, str, int]] = set()
 
 
@@ -140,13 +159,14 @@ def _warm_up(signal: np.ndarray, freqs_hz: np.ndarray, capture: Capture, device:
 
 def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | None,
                 prior: str | float | None = "none", device: str = "cpu", grid: RadarGrid | None = None,
-                **params) -> Reconstruction:
+                roi: str | dict | SkipSettings | None = "auto", **params) -> Reconstruction:
     """Depth map of the capture's loaded radar frame with `method` (bp | 2fsk | 3fsk | mm2fsk).
 
     freq: a configuration name of `methods.frequencies` (d05 ... d10, full, d05_d10, d1_d10, d2_d10), a list of
     target frequencies in GHz (nearest present ones are used), or None for all frequencies.
     prior: 'none', 'realsense', 'photogrammetry' (MM-2FSK; BP searches a band around it), or a scalar depth in
     metres (2FSK/3FSK start from it; BP searches a band around it). grid: overrides the frame's grid.
+    roi: the skips and region of interest (module doc; 'none' = the full computation).
     params: threshold_db (filter, dB below the maximum, default 14; None = off); scalar_prior_m (the scalar
     prior of 2FSK/3FSK when prior='none', default 0.40 m; other methods ignore it); band_m (BP with a prior).
     A sensor prior that covers no radar pixel (empty mask, object outside the grid) gives an explicit all-invalid
@@ -162,6 +182,7 @@ def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | Non
     prior_value = parse_prior(prior)
     invalid_reason = None
     _check(method, freq, len(indices), prior_value, params)
+    skips = resolve(roi, method, len(indices))
     device = resolve_device(device)
     grid = grid or frame.grid
     signal = np.ascontiguousarray(frame.signal[:, :, indices])
@@ -173,6 +194,7 @@ def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | Non
     scalar_prior_m = float(params.pop("scalar_prior_m", DEFAULT_PRIOR_M))
     timer = StageTimer()
     antennas = capture.antennas
+    region = capture_roi(capture, grid, skips)
     if prior_value in SENSOR_PRIORS:
         with timer.stage("prior"):
             prior_m = prior_image_m(capture, prior_value, grid, device if method == "mm2fsk" else "cpu")
@@ -183,14 +205,14 @@ def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | Non
         prior_m = prior_value
     if method == "bp":
         result = reconstruct_bp(signal, freqs_hz, antennas, grid, prior_m=prior_m, device=device, timer=timer,
-                                **params)
+                                roi=region, skips=skips, **params)
     elif method == "mm2fsk":
         result = reconstruct_mm2fsk(signal, freqs_hz, antennas, grid, prior_m, device=device, timer=timer,
-                                    **params)
+                                    roi=region, **params)
     else:
         run = reconstruct_2fsk if method == "2fsk" else reconstruct_3fsk
         result = run(signal, freqs_hz, antennas, grid, prior_m=scalar_prior_m if prior_m is None else prior_m,
-                     device=device, **params)
+                     device=device, roi=region, skips=skips, **params)
     if invalid_reason is None and not result.valid.any():
         invalid_reason = "no pixel has a nonzero magnitude within the filter threshold (a frame without signal?)"
     result.extra.update(freq=freq, prior=prior, device=device, invalid_reason=invalid_reason)

@@ -8,6 +8,11 @@ flat triple gets no offset. The filter quantity is the linear max projection max
 Optional search band around a prior: a scalar prior restricts the z range of the grid to |z - prior| <= band_m;
 a per-pixel prior image (ny, nx) samples each pixel at prior + k dz, |k dz| <= band_m (dz = the grid's z step),
 and pixels without a prior stay NaN.
+
+Region of interest and skips (methods.roi, methods.skips): with an ROI, only its pixels and depths are evaluated
+(the rest NaN); on the CPU the depth search can run coarse-to-fine with a filter-aware pixel skip and, with many
+frequencies, on range-compressed profiles (methods.bp_search, methods.range_cpu). With no ROI and no skip
+(`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
 from __future__ import annotations
 
@@ -15,9 +20,12 @@ import numpy as np
 
 from bench.antennas import AntennaArray
 from bench.capture import RadarGrid
+from methods import bp_search, range_cpu
 from methods.correlate import correlate, correlate_volume
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
 from methods.reconstruction import Reconstruction
+from methods.roi import Roi, full_roi, intersect, pixel_pitch_m
+from methods.skips import NONE, SkipSettings
 from methods.timing import StageTimer
 
 DEFAULT_BAND_M = 0.05
@@ -58,9 +66,10 @@ def _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, device, timer):
         return peak_depth_m(np.abs(volume), float(z_m[0]), dz_m)
 
 
-def _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, device, timer):
-    """Depth and max projection (ny, nx) from per-pixel profiles prior + k dz, |k dz| <= band_m; NaN: no prior."""
-    has_prior = np.isfinite(prior_m)
+def _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, device, timer, pixels=None):
+    """Depth and max projection (ny, nx) from per-pixel profiles prior + k dz, |k dz| <= band_m; NaN: no prior
+    (or outside `pixels`, the ROI's pixels, when given)."""
+    has_prior = np.isfinite(prior_m) if pixels is None else np.isfinite(prior_m) & pixels
     n_band = int(np.floor(band_m / dz_m + 1e-9))
     steps_m = np.arange(-n_band, n_band + 1) * dz_m
     x_m, y_m = grid.pixel_xy_m()
@@ -76,26 +85,135 @@ def _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, devic
     return depth_m, max_proj
 
 
+def _evaluator(signal, freqs_hz, antennas, device, use_range, points_hull_m):
+    """Frequency-summed correlation at points: the CPU range-compressed gather (table built once over the paths
+    of `points_hull_m`, the corners of every point the search may evaluate) or the API's per-frequency sum."""
+    if use_range:
+        table = range_cpu.range_table(signal, freqs_hz, *range_cpu.path_bounds_m(antennas.tx_m, antennas.rx_m,
+                                                                                 points_hull_m))
+        return lambda points_m: range_cpu.correlate_range_cpu(table, antennas.tx_m, antennas.rx_m, points_m)
+    return lambda points_m: correlate(signal, freqs_hz, antennas.tx_m, antennas.rx_m, points_m, sum_freqs=True,
+                                      device=device)
+
+
+def _box_corners_m(x_m, y_m, z_m) -> np.ndarray:
+    """(8, 3) corners of the box spanned by the coordinate arrays."""
+    return np.array([[x, y, z] for x in (np.min(x_m), np.max(x_m)) for y in (np.min(y_m), np.max(y_m))
+                     for z in (np.min(z_m), np.max(z_m))])
+
+
+def _plan_of(freqs_hz, antennas, z_m, dz_m, skips: SkipSettings):
+    """Function (x_m, y_m) -> the coarse-to-fine plan of those pixels (methods.bp_search.plan_search) at the
+    nearest depth of z_m."""
+    z_near_m = float(np.min(z_m))
+    return lambda x_m, y_m: bp_search.plan_search(freqs_hz, antennas, x_m, y_m, z_near_m, dz_m,
+                                                  skips.psf_max_loss_db, skips.max_coarse_step_m,
+                                                  skips.candidate_margin_db)
+
+
+def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi: Roi, skips: SkipSettings,
+                      threshold_db, device, timer, extra: dict):
+    """Depth and max projection (ny, nx) over the ROI's pixels and the depths z_m (z_outer, the grid's or the prior
+    band's depths, cut to the ROI): coarse ROI, coarse-to-fine search, range compression as `skips` say; NaN
+    outside the ROI. A peak on a depth edge of z_m that is not an edge of z_outer gives NaN (bp_search)."""
+    x_img, y_img = grid.pixel_xy_m()
+    z_edges = ((len(z_m) > 0 and bool(np.isclose(z_m[0], z_outer[0], atol=1e-9))),
+               (len(z_m) > 0 and bool(np.isclose(z_m[-1], z_outer[-1], atol=1e-9))))
+    use_range = skips.bp_range_cpu and device == "cpu" and range_cpu.worth_it(freqs_hz)
+    pixels = roi.pixels
+    n_evaluated, plan = 0, None
+    depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
+    with timer.stage("correlate"):
+        if pixels.any() and len(z_m):
+            evaluate = _evaluator(signal, freqs_hz, antennas, device, use_range,
+                                  _box_corners_m(x_img[pixels], y_img[pixels], z_m))
+            # the plan from the depths before the coarse ROI narrows them: its nearest depth (the sharpest focus)
+            # depends on the grid and mask_bb only, so it is computed once per configuration (bp_search cache)
+            plan_of = _plan_of(freqs_hz, antennas, z_m, dz_m, skips)
+            if skips.coarse_roi and threshold_db is not None and len(z_m) > 1:
+                step_px, radius_px = skips.lattice_px(pixel_pitch_m(grid))
+                found, n_coarse = bp_search.coarse_roi(evaluate, pixels, x_img, y_img, z_m, plan_of, threshold_db,
+                                                       step_px, radius_px, skips.keep_margin_db, skips.roi_margin_m)
+                n_evaluated += n_coarse
+                keep_z = (z_m >= found.z_min_m - 1e-9) & (z_m <= found.z_max_m + 1e-9)
+                # the depth edges the coarse ROI cut are ROI edges, not grid edges, from now on
+                z_edges = (z_edges[0] and bool(keep_z[0]), z_edges[1] and bool(keep_z[-1]))
+                z_m, pixels = z_m[keep_z], found.pixels
+                roi = intersect(roi, found)
+            if pixels.any() and len(z_m):
+                x_px, y_px = x_img[pixels], y_img[pixels]
+                plan = (plan_of(x_px, y_px) if skips.bp_coarse_to_fine
+                        else bp_search.SearchPlan.every_sample(len(x_px)))
+                found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges)
+                depth_m[pixels], max_proj[pixels] = found_depth.depth_m, found_depth.max_projection
+                n_evaluated += found_depth.n_evaluated
+    extra.update(roi_px=int(pixels.sum()), roi_z_m=(float(z_m[0]), float(z_m[-1])) if len(z_m) else None,
+                 evaluated_voxels=n_evaluated, range_cpu=use_range, roi_sources=roi.sources,
+                 coarse_step_median=None if plan is None else float(np.median(plan.step)))
+    return depth_m, max_proj
+
+
+def _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi: Roi, device, timer, extra: dict):
+    """Warp devices: the rectangular volume over the ROI's bounding box (rows, columns, z_m), NaN outside the ROI."""
+    rows, cols = np.nonzero(roi.pixels)
+    depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
+    if len(rows) and len(z_m):
+        r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+        y_desc = grid.y_m[::-1]
+        from methods.correlate import volume_peak_depth
+        box_depth, box_proj = volume_peak_depth(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m[c0:c1],
+                                                y_desc[r0:r1], z_m, device=device, timer=timer)
+        inside = roi.pixels[r0:r1, c0:c1]
+        depth_m[r0:r1, c0:c1] = np.where(inside, box_depth, np.nan)
+        max_proj[r0:r1, c0:c1] = np.where(inside, box_proj, np.nan)
+        extra.update(evaluated_voxels=int((r1 - r0) * (c1 - c0) * len(z_m)))
+    extra.update(roi_px=roi.n_pixels, roi_z_m=(float(z_m[0]), float(z_m[-1])) if len(z_m) else None,
+                 roi_sources=roi.sources)
+    return depth_m, max_proj
+
+
 def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                    prior_m: float | np.ndarray | None = None, band_m: float = DEFAULT_BAND_M,
                    threshold_db: float | None = DEFAULT_THRESHOLD_DB, device: str = "cpu",
-                   timer: StageTimer | None = None) -> Reconstruction:
-    """BP depth map on `grid` from `signal` (n_rx, n_tx, F) at `freqs_hz`; see the module doc for `prior_m`."""
+                   timer: StageTimer | None = None, roi: Roi | None = None,
+                   skips: SkipSettings = NONE) -> Reconstruction:
+    """BP depth map on `grid` from `signal` (n_rx, n_tx, F) at `freqs_hz`; see the module doc for `prior_m`.
+
+    `roi` (methods.roi; None = the whole grid) bounds the pixels and depths evaluated; `skips` (methods.skips)
+    switches the coarse ROI, the coarse-to-fine search and CPU range compression (the last two on the CPU only).
+    """
     timer = timer or StageTimer()
     z_m = grid.z_m
     if len(z_m) < 2:
         raise ValueError("BP needs a z grid with at least two samples")
     dz_m = float(z_m[1] - z_m[0])
+    roi = roi if roi is not None else full_roi(grid)
+    extra: dict = {"band_m": None if prior_m is None else band_m}
     if prior_m is not None and not np.isscalar(prior_m):
-        depth_m, max_proj = _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, device, timer)
+        pixels = None if roi.pixels.all() else roi.pixels
+        depth_m, max_proj = _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, device, timer,
+                                          pixels)
+        extra.update(roi_px=int((np.isfinite(prior_m) & roi.pixels).sum()), roi_sources=roi.sources + ("prior",))
     else:
         if prior_m is not None:
             z_m = z_m[np.abs(z_m - prior_m) <= band_m + 1e-9]
             if len(z_m) == 0:
                 raise ValueError(f"no z sample of the grid lies within {band_m} m of the prior {prior_m} m")
-        depth_m, max_proj = _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, device, timer)
+        z_outer = z_m                          # the depths today's computation searches (grid, or prior band)
+        z_m = z_outer[roi.z_indices(z_outer)]
+        roi_cuts = not roi.pixels.all() or len(z_m) != len(z_outer)
+        cpu_skips = skips.coarse_roi or skips.bp_coarse_to_fine or (skips.bp_range_cpu and
+                                                                    range_cpu.worth_it(freqs_hz))
+        if device == "cpu" and (roi_cuts or cpu_skips):
+            depth_m, max_proj = _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi, skips,
+                                                  threshold_db, device, timer, extra)
+        elif roi_cuts:
+            depth_m, max_proj = _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi, device, timer,
+                                                  extra)
+        else:
+            depth_m, max_proj = _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, device, timer)
+            extra.update(roi_px=roi.n_pixels, evaluated_voxels=roi.n_pixels * len(z_m), roi_sources=roi.sources)
     with timer.stage("filter"):
         depth_m = filter_depth(depth_m, max_proj, threshold_db)
     return Reconstruction(depth_m=depth_m, magnitude=max_proj, freqs_hz=np.asarray(freqs_hz),
-                          timings_ms=timer.finish(), grid=grid, method="bp",
-                          extra={"band_m": None if prior_m is None else band_m})
+                          timings_ms=timer.finish(), grid=grid, method="bp", extra=extra)

@@ -8,6 +8,11 @@ Two passes from the scalar prior z0 (default 0.40 m as in the paper): pass 1 cor
 pixel with the largest |c1| gives the correction z1 = z0 - dz(that pixel), applied to all pixels; pass 2
 correlates every pixel at z1 and corrects each pixel by its own dz. The filter quantity is the magnitude of the
 mean residual phasor over the pairs and both frequencies of the final pass.
+
+Region of interest and skips (methods.roi, methods.skips): both passes run only on the ROI's pixels (pass 1's
+strongest pixel is taken among them), and with `fsk_keep` pass 2 runs only where the filter can keep a pixel
+(methods.keep_skip); depths outside the ROI's depth interval are invalid. With neither (`roi=none`) the
+computation is today's.
 """
 from __future__ import annotations
 
@@ -17,7 +22,10 @@ from bench.antennas import AntennaArray
 from bench.capture import RadarGrid
 from methods.correlate import C_M_PER_S, correlate
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
+from methods.keep_skip import run_where_kept
 from methods.reconstruction import Reconstruction
+from methods.roi import Roi, full_roi, pixel_pitch_m
+from methods.skips import NONE, SkipSettings
 from methods.timing import StageTimer
 
 DEFAULT_PRIOR_M = 0.40
@@ -41,6 +49,29 @@ def mean_phasor_magnitude(phasors: np.ndarray) -> np.ndarray:
     return np.abs(phasors.mean(axis=0)).astype(np.float64)
 
 
+def first_pass_z1_m(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray,
+                    y_m: np.ndarray, prior_m: float, device: str, timer: StageTimer) -> tuple[float, dict]:
+    """Pass 1 of 2FSK: correlate the pixels (x_m, y_m) (N,) at the scalar prior; the strongest pixel's correction
+    gives the common guess z1 (m). Returns (z1, details). `signal` (n_rx, n_tx, 2) holds f_lo < f_hi."""
+    f_lo, f_hi = freqs_hz
+    with timer.stage("correlate"):
+        first = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, prior_m, device)
+    with timer.stage("depth"):
+        ref = int(np.argmax(np.abs(first[0])))
+        z1_m = prior_m - float(depth_correction_m(first[0, ref], first[1, ref], f_lo, f_hi))
+    return z1_m, {"reference_pixel": ref, "z1_m": z1_m}
+
+
+def second_pass(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray,
+                y_m: np.ndarray, z1_m: float, device: str, timer: StageTimer) -> tuple[np.ndarray, np.ndarray]:
+    """Pass 2 of 2FSK at z1 for the pixels (x_m, y_m) (N,): depth (N,) m and the phasors (2, N)."""
+    with timer.stage("correlate"):
+        second = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, z1_m, device)
+    with timer.stage("depth"):
+        depth_m = z1_m - depth_correction_m(second[0], second[1], *freqs_hz)
+    return depth_m, second
+
+
 def two_pass_depth_m(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray,
                      y_m: np.ndarray, prior_m: float, device: str, timer: StageTimer
                      ) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -48,36 +79,56 @@ def two_pass_depth_m(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
 
     `signal` (n_rx, n_tx, 2) holds the frequencies `freqs_hz` (f_lo < f_hi).
     """
-    f_lo, f_hi = freqs_hz
-    with timer.stage("correlate"):
-        first = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, prior_m, device)
-    with timer.stage("depth"):
-        ref = int(np.argmax(np.abs(first[0])))
-        z1_m = prior_m - float(depth_correction_m(first[0, ref], first[1, ref], f_lo, f_hi))
-    with timer.stage("correlate"):
-        second = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, z1_m, device)
-    with timer.stage("depth"):
-        depth_m = z1_m - depth_correction_m(second[0], second[1], f_lo, f_hi)
-    return depth_m, second, {"reference_pixel": ref, "z1_m": z1_m}
+    z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_m, y_m, prior_m, device, timer)
+    depth_m, second = second_pass(signal, freqs_hz, antennas, x_m, y_m, z1_m, device, timer)
+    return depth_m, second, details
 
 
-def finish(depth_m: np.ndarray, phasors: np.ndarray, grid: RadarGrid, freqs_hz: np.ndarray, method: str,
-           threshold_db: float | None, timer: StageTimer, extra: dict) -> Reconstruction:
-    """Filter the per-pixel depths (ny*nx,) by the mean phasor magnitude and package the Reconstruction."""
+def roi_depth_m(depth_m: np.ndarray, roi: Roi) -> np.ndarray:
+    """Depths outside the ROI's depth interval become NaN (the point lies outside the ROI)."""
+    if np.isinf(roi.z_min_m) and np.isinf(roi.z_max_m):
+        return depth_m
+    with np.errstate(invalid="ignore"):
+        return np.where((depth_m >= roi.z_min_m) & (depth_m <= roi.z_max_m), depth_m, np.nan)
+
+
+def finish(depth_m: np.ndarray, magnitude: np.ndarray, grid: RadarGrid, freqs_hz: np.ndarray, method: str,
+           threshold_db: float | None, timer: StageTimer, extra: dict, roi: Roi | None = None) -> Reconstruction:
+    """Filter the depth image (ny, nx) by the mean-phasor magnitude image (ny, nx; NaN = not evaluated), drop
+    depths outside the ROI's depth interval, and package the Reconstruction."""
     with timer.stage("filter"):
-        magnitude = mean_phasor_magnitude(phasors).reshape(grid.image_shape)
-        depth_m = filter_depth(depth_m.reshape(grid.image_shape), magnitude, threshold_db)
+        depth_m = filter_depth(depth_m, magnitude, threshold_db)
+        if roi is not None:
+            depth_m = roi_depth_m(depth_m, roi)
     return Reconstruction(depth_m=depth_m, magnitude=magnitude, freqs_hz=np.asarray(freqs_hz),
                           timings_ms=timer.finish(), grid=grid, method=method, extra=extra)
 
 
 def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                     device: str = "cpu") -> Reconstruction:
-    """2FSK depth map on `grid`'s pixels from a two-frequency frame `signal` (n_rx, n_tx, 2)."""
+                     device: str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE) -> Reconstruction:
+    """2FSK depth map on `grid`'s pixels from a two-frequency frame `signal` (n_rx, n_tx, 2); `roi` (None = the
+    whole grid) and `skips.fsk_keep` as in the module doc."""
     if len(freqs_hz) != 2:
         raise ValueError(f"2FSK needs exactly two frequencies, got {len(freqs_hz)}")
     timer = StageTimer()
-    x_m, y_m = (a.ravel() for a in grid.pixel_xy_m())
-    depth_m, phasors, details = two_pass_depth_m(signal, freqs_hz, antennas, x_m, y_m, prior_m, device, timer)
-    return finish(depth_m, phasors, grid, freqs_hz, "2fsk", threshold_db, timer, {"prior_m": prior_m, **details})
+    roi = roi if roi is not None else full_roi(grid)
+    x_img, y_img = grid.pixel_xy_m()
+    pixels = roi.pixels
+    if not pixels.any():
+        nan = np.full(grid.image_shape, np.nan)
+        return finish(nan, nan.copy(), grid, freqs_hz, "2fsk", threshold_db, timer,
+                      {"prior_m": prior_m, "roi_px": 0, "roi_sources": roi.sources}, roi)
+    z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_img[pixels], y_img[pixels], prior_m, device,
+                                    timer)
+
+    def run(mask: np.ndarray) -> dict[str, np.ndarray]:
+        depth_m, phasors = second_pass(signal, freqs_hz, antennas, x_img[mask], y_img[mask], z1_m, device, timer)
+        with timer.stage("filter"):
+            return {"depth_m": depth_m, "magnitude": mean_phasor_magnitude(phasors)}
+
+    step_px, radius_px = skips.lattice_px(pixel_pitch_m(grid))
+    evaluated, images = run_where_kept(pixels, run, threshold_db, step_px, skips.keep_margin_db, radius_px,
+                                       enabled=skips.fsk_keep)
+    extra = {"prior_m": prior_m, **details, "roi_px": int(evaluated.sum()), "roi_sources": roi.sources}
+    return finish(images["depth_m"], images["magnitude"], grid, freqs_hz, "2fsk", threshold_db, timer, extra, roi)

@@ -20,6 +20,10 @@ must be wide for precision. Re-correlating at d1 refocuses every pixel at its ow
 clean. Cost: three correlation passes (2 + 2 + 3 frequencies per pixel) against two (2 + 2) for 2FSK, in line
 with the paper's 7 ms vs 4 ms. The filter quantity is the magnitude of the mean residual phasor over the pairs
 and the three frequencies of the fine pass.
+
+Region of interest and skips: the passes run only on the ROI's pixels; with `fsk_keep` the coarse step's pass 2
+and the fine pass run only where the filter (on the fine pass's magnitude) can keep a pixel (methods.keep_skip);
+depths outside the ROI's depth interval are invalid. With neither (`roi=none`) the computation is today's.
 """
 from __future__ import annotations
 
@@ -29,8 +33,12 @@ from bench.antennas import AntennaArray
 from bench.capture import RadarGrid
 from methods.correlate import C_M_PER_S
 from methods.filtering import DEFAULT_THRESHOLD_DB
-from methods.fsk import DEFAULT_PRIOR_M, correlate_pixels, finish, two_pass_depth_m
+from methods.fsk import (DEFAULT_PRIOR_M, correlate_pixels, finish, first_pass_z1_m, mean_phasor_magnitude,
+                         second_pass)
+from methods.keep_skip import run_where_kept
 from methods.reconstruction import Reconstruction
+from methods.roi import Roi, full_roi, pixel_pitch_m
+from methods.skips import NONE, SkipSettings
 from methods.timing import StageTimer
 
 
@@ -48,21 +56,39 @@ def slope_correction_m(phasors: np.ndarray, freqs_hz: np.ndarray) -> np.ndarray:
 
 def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                     device: str = "cpu") -> Reconstruction:
-    """3FSK depth map on `grid`'s pixels from a three-frequency frame `signal` (n_rx, n_tx, 3), f ascending."""
+                     device: str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE) -> Reconstruction:
+    """3FSK depth map on `grid`'s pixels from a three-frequency frame `signal` (n_rx, n_tx, 3), f ascending;
+    `roi` (None = the whole grid) and `skips.fsk_keep` as in the module doc."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     if len(freqs_hz) != 3 or not np.all(np.diff(freqs_hz) > 0):
         raise ValueError(f"3FSK needs three ascending frequencies, got {freqs_hz}")
     timer = StageTimer()
-    x_m, y_m = (a.ravel() for a in grid.pixel_xy_m())
+    roi = roi if roi is not None else full_roi(grid)
+    x_img, y_img = grid.pixel_xy_m()
+    pixels = roi.pixels
     pairs = [(0, 1), (1, 2)]                            # the smallest difference is between neighbours
-    coarse = min(pairs, key=lambda p: freqs_hz[p[1]] - freqs_hz[p[0]])
-    coarse_m, _, details = two_pass_depth_m(signal[:, :, list(coarse)], freqs_hz[list(coarse)], antennas,
-                                            x_m, y_m, prior_m, device, timer)
-    with timer.stage("correlate"):
-        phasors = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, coarse_m, device)
-    with timer.stage("depth"):
-        depth_m = coarse_m - slope_correction_m(phasors, freqs_hz)
-    extra = {"prior_m": prior_m, "coarse_pair_hz": tuple(freqs_hz[list(coarse)]),
-             "coarse_depth_m": coarse_m.reshape(grid.image_shape), **details}
-    return finish(depth_m, phasors, grid, freqs_hz, "3fsk", threshold_db, timer, extra)
+    coarse = list(min(pairs, key=lambda p: freqs_hz[p[1]] - freqs_hz[p[0]]))
+    extra = {"prior_m": prior_m, "coarse_pair_hz": tuple(freqs_hz[coarse])}
+    if not pixels.any():
+        nan = np.full(grid.image_shape, np.nan)
+        return finish(nan, nan.copy(), grid, freqs_hz, "3fsk", threshold_db, timer,
+                      {**extra, "coarse_depth_m": nan.copy(), "roi_px": 0, "roi_sources": roi.sources}, roi)
+    coarse_signal, coarse_hz = signal[:, :, coarse], freqs_hz[coarse]
+    z1_m, details = first_pass_z1_m(coarse_signal, coarse_hz, antennas, x_img[pixels], y_img[pixels], prior_m,
+                                    device, timer)
+
+    def run(mask: np.ndarray) -> dict[str, np.ndarray]:
+        x_m, y_m = x_img[mask], y_img[mask]
+        coarse_m, _ = second_pass(coarse_signal, coarse_hz, antennas, x_m, y_m, z1_m, device, timer)
+        with timer.stage("correlate"):
+            phasors = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, coarse_m, device)
+        with timer.stage("depth"):
+            depth_m = coarse_m - slope_correction_m(phasors, freqs_hz)
+        with timer.stage("filter"):
+            return {"depth_m": depth_m, "magnitude": mean_phasor_magnitude(phasors), "coarse_m": coarse_m}
+
+    step_px, radius_px = skips.lattice_px(pixel_pitch_m(grid))
+    evaluated, images = run_where_kept(pixels, run, threshold_db, step_px, skips.keep_margin_db, radius_px,
+                                       enabled=skips.fsk_keep)
+    extra.update(coarse_depth_m=images["coarse_m"], **details, roi_px=int(evaluated.sum()), roi_sources=roi.sources)
+    return finish(images["depth_m"], images["magnitude"], grid, freqs_hz, "3fsk", threshold_db, timer, extra, roi)

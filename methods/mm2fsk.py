@@ -4,6 +4,9 @@ Only pixels that have a prior (finite in `prior_depth_m`, see `methods.prior`) a
 prior depth; depth = prior - c angle(c2 conj(c1)) / (4 pi (f2 - f1)). Pixels without a prior stay NaN. The filter
 quantity is the magnitude of the mean residual phasor over pairs and both frequencies, thresholded relative to
 the maximum over the correlated pixels.
+
+Region of interest (methods.roi): only pixels with a prior inside the ROI are correlated, and depths outside its
+depth interval are invalid; the prior's footprint is itself the ROI this method always had.
 """
 from __future__ import annotations
 
@@ -12,28 +15,40 @@ import numpy as np
 from bench.antennas import AntennaArray
 from bench.capture import RadarGrid
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
-from methods.fsk import correlate_pixels, depth_correction_m, mean_phasor_magnitude
+from methods.fsk import correlate_pixels, depth_correction_m, mean_phasor_magnitude, roi_depth_m
 from methods.reconstruction import Reconstruction
+from methods.roi import Roi
 from methods.timing import StageTimer
 
 
 def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid,
                        prior_depth_m: np.ndarray, *, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                       device: str = "cpu", timer: StageTimer | None = None) -> Reconstruction:
+                       device: str = "cpu", timer: StageTimer | None = None, roi: Roi | None = None
+                       ) -> Reconstruction:
     """MM-2FSK depth map (ny, nx) from a two-frequency `signal` (n_rx, n_tx, 2) and a prior (ny, nx), metres.
 
-    Pass the `timer` that already timed the prior so that `total` includes it.
+    Pass the `timer` that already timed the prior so that `total` includes it. `roi` (None = the whole grid)
+    bounds the pixels correlated and the depths kept.
     """
     if len(freqs_hz) != 2:
         raise ValueError(f"MM-2FSK needs exactly two frequencies, got {len(freqs_hz)}")
     if prior_depth_m.shape != grid.image_shape:
         raise ValueError(f"prior shape {prior_depth_m.shape} does not match the radar image {grid.image_shape}")
+    if roi is not None and roi.pixels.all() and np.isinf(roi.z_min_m) and np.isinf(roi.z_max_m):
+        roi = None                                   # the whole grid: nothing to restrict
+    if hasattr(prior_depth_m, "n_covered") and roi is not None and not roi.pixels.all():
+        prior_depth_m = np.asarray(prior_depth_m)    # a GPU prior with a lateral ROI: the host path restricts it
     if hasattr(prior_depth_m, "n_covered"):          # a GPU prior (methods.prior_warp): the frame stays there
         from methods.prior_warp import reconstruct_mm2fsk_device
-        return reconstruct_mm2fsk_device(signal, freqs_hz, antennas, grid, prior_depth_m, threshold_db=threshold_db,
-                                         timer=timer)
+        result = reconstruct_mm2fsk_device(signal, freqs_hz, antennas, grid, prior_depth_m,
+                                           threshold_db=threshold_db, timer=timer)
+        if roi is not None:                          # a depth interval only: drop depths outside it
+            result.depth_m = roi_depth_m(result.depth_m, roi)
+        result.extra.update(roi_px=result.extra.get("prior_pixels"),
+                            roi_sources=(() if roi is None else roi.sources) + ("prior",))
+        return result
     timer = timer or StageTimer()
-    has_prior = np.isfinite(prior_depth_m)
+    has_prior = np.isfinite(prior_depth_m) if roi is None else np.isfinite(prior_depth_m) & roi.pixels
     x_m, y_m = grid.pixel_xy_m()
     prior_m = prior_depth_m[has_prior]
     with timer.stage("correlate"):
@@ -45,6 +60,10 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
         magnitude = np.full(grid.image_shape, np.nan)
         magnitude[has_prior] = mean_phasor_magnitude(phasors)
         depth_m = filter_depth(depth_m, magnitude, threshold_db)
+        if roi is not None:
+            depth_m = roi_depth_m(depth_m, roi)
     return Reconstruction(depth_m=depth_m, magnitude=magnitude, freqs_hz=np.asarray(freqs_hz),
                           timings_ms=timer.finish(), grid=grid, method="mm2fsk",
-                          extra={"prior_depth_m": prior_depth_m, "prior_pixels": int(has_prior.sum())})
+                          extra={"prior_depth_m": prior_depth_m, "prior_pixels": int(has_prior.sum()),
+                                 "roi_px": int(has_prior.sum()),
+                                 "roi_sources": (() if roi is None else roi.sources) + ("prior",)})

@@ -44,8 +44,10 @@ class RangePlan:
         return self.n_samples * self.df_hz / C_M_PER_S
 
 
-def plan(freqs_hz: np.ndarray) -> RangePlan | None:
-    """RangePlan for frequencies on an equidistant grid, or None (fewer than 2, off-grid, or path wrap)."""
+def plan(freqs_hz: np.ndarray, oversampling: int = OVERSAMPLING) -> RangePlan | None:
+    """RangePlan for frequencies on an equidistant grid, or None (fewer than 2, off-grid, or path wrap).
+
+    `oversampling` (Q): profile samples per grid bin; L = Q * n_grid rounded up to a power of two."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     if len(freqs_hz) < 2:
         return None
@@ -58,7 +60,7 @@ def plan(freqs_hz: np.ndarray) -> RangePlan | None:
         return None
     index = np.rint(index).astype(np.int64)
     n_grid = int(index.max()) + 1
-    n_samples = 1 << int(np.ceil(np.log2(OVERSAMPLING * n_grid)))
+    n_samples = 1 << int(np.ceil(np.log2(oversampling * n_grid)))
     n_centre = (n_grid - 1) / 2.0
     return RangePlan(index, float(df_hz), float(f0 + n_centre * df_hz), n_centre, n_samples)
 
@@ -66,7 +68,8 @@ def plan(freqs_hz: np.ndarray) -> RangePlan | None:
 def worth_it(freqs_hz: np.ndarray, device: str) -> bool:
     """Choice of `correlate_volume(method="auto")`: range compression on Warp devices with many frequencies.
 
-    On the numpy CPU path the per-frequency BLAS sum stays: numpy has no fast gather, so it is the faster one there.
+    `correlate_volume` on the numpy CPU path keeps the per-frequency BLAS sum; BP's depth search on the CPU uses
+    the numpy range-compressed gather of `methods.range_cpu` instead (measured faster there, notes/gpu.md).
     """
     return device != "cpu" and len(freqs_hz) >= RANGE_MIN_FREQS and plan(freqs_hz) is not None
 
