@@ -131,7 +131,7 @@ def reference_path(ref_dir: Path | None, capture, cell: str, grid_name: str) -> 
 
 
 def measure_cell(capture, gt, cell: str, grid_name: str, device: str, repeat: int, mode: str,
-                 ref_dir: Path | None, full_planes: int, log=print) -> list[dict]:
+                 ref_dir: Path | None, full_planes: int, only: list[str] | None = None, log=print) -> list[dict]:
     """Rows (CSV_COLUMNS) for one capture and cell: the full computation and every variant, interleaved."""
     import socket
 
@@ -143,7 +143,7 @@ def measure_cell(capture, gt, cell: str, grid_name: str, device: str, repeat: in
     method, freq, prior = CELLS[cell]
     grid = compute_grid(capture, grid_name)
     n_freqs = len(frequency_indices(capture.radar.freqs_hz, freq))
-    runs = variants(method, n_freqs, mode)
+    runs = [(n, v) for n, v in variants(method, n_freqs, mode) if not only or n in only]
     ref_file = reference_path(ref_dir, capture, cell, grid_name)
     full_depth = np.load(ref_file)["depth_m"] if ref_file is not None and ref_file.exists() else None
     full_grid = grid if full_depth is None else _planes_grid(grid, full_planes)
@@ -221,6 +221,8 @@ def main(argv=None) -> int:
     parser.add_argument("--reference", default=None, help="folder of full-computation depth maps (read, or written)")
     parser.add_argument("--full-planes", type=cli.positive_int, default=10,
                         help="depth planes the full computation is timed on when its depth map is read")
+    parser.add_argument("--variants", nargs="*", default=None,
+                        help="run only these variants (e.g. auto all, or all-bp_range_cpu in leave-one-out mode)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT / "perf_skips.csv", help="CSV written")
     args = parser.parse_args(argv)
     from bench import maroon
@@ -237,7 +239,8 @@ def main(argv=None) -> int:
         gt = ground_truth(capture, capture.radar.grid)
         for cell in args.cells:
             rows += measure_cell(capture, gt, cell, args.grid, device, args.repeat, args.mode,
-                                 None if args.reference is None else Path(args.reference), args.full_planes)
+                                 None if args.reference is None else Path(args.reference), args.full_planes,
+                                 args.variants)
             write_csv(rows, out)
     return 0
 

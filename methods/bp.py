@@ -131,10 +131,12 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
             # depends on the grid and mask_bb only, so it is computed once per configuration (bp_search cache)
             plan_of = _plan_of(freqs_hz, antennas, z_m, dz_m, skips)
             if skips.coarse_roi and threshold_db is not None and len(z_m) > 1:
-                step_px, radius_px = skips.lattice_px(pixel_pitch_m(grid))
+                step_px, radius_px = skips.lattice_px(pixel_pitch_m(grid), skips.roi_lattice_step_m)
                 found, n_coarse = bp_search.coarse_roi(evaluate, pixels, x_img, y_img, z_m, plan_of, threshold_db,
-                                                       step_px, radius_px, skips.keep_margin_db, skips.roi_margin_m)
+                                                       step_px, radius_px, skips.roi_keep_margin_db,
+                                                       skips.roi_margin_m)
                 n_evaluated += n_coarse
+                extra["coarse_roi_voxels"] = n_coarse
                 keep_z = (z_m >= found.z_min_m - 1e-9) & (z_m <= found.z_max_m + 1e-9)
                 # the depth edges the coarse ROI cut are ROI edges, not grid edges, from now on
                 z_edges = (z_edges[0] and bool(keep_z[0]), z_edges[1] and bool(keep_z[-1]))

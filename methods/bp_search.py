@@ -4,8 +4,9 @@ the coarse pass that bounds the object (methods.roi) - all on arbitrary point se
 
 Search (per pixel, on the fine depth samples z_k of the grid inside the ROI):
 1. coarse samples every `step` fine samples (and the last one);
-2. candidates: coarse samples within `candidate_db` of the pixel's coarse maximum;
-3. refine: every fine sample within step - 1 of a candidate;
+2. candidates: coarse samples within a window (dB) of the pixel's coarse maximum;
+3. refine by halving: around each candidate c of a level of spacing s evaluate c +- ceil(s / 2); the next level's
+   candidates are the evaluated samples within its (smaller) window of the pixel's maximum so far; down to 1;
 4. climb: while a pixel's argmax has an unevaluated neighbour, evaluate it (the parabola needs both neighbours,
    and a peak that moved to a window's edge keeps climbing);
 5. depth and max projection by `methods.bp.peak_depth_m` on the evaluated samples (unevaluated ones never win).
@@ -14,10 +15,10 @@ When it finds the full grid's peak. Let loss(d) bound how far |V(z)| falls (in d
 peaks. The coarse sample nearest the continuous peak z* lies within step/2 of it, so it is at most
 loss(step dz / 2) below |V(z*)|, which is >= every coarse sample: it is a candidate whenever
 candidate_db >= loss(step dz / 2). The fine grid's maximum sits within dz / 2 of the continuous peak of its own
-lobe, so that lobe's nearest coarse sample is a candidate too once candidate_db >= loss(step dz / 2) +
-loss(dz / 2); refinement (+- step - 1 around each candidate) and climbing then evaluate it. So the search returns
-the full grid's argmax when candidate_db >= loss(step dz / 2) + loss(dz / 2) (tests: exact on random sums of
-Gaussians, where loss is known, and a constructed miss when the window is too small).
+lobe, so that lobe's nearest coarse sample is a candidate too once the window >= loss(step dz / 2) + loss(dz / 2).
+Each halving keeps the peak within half a spacing of a candidate (c, c +- ceil(s / 2) cover c +- s / 2), so with
+every level's window >= loss(half its spacing) + loss(dz / 2) the search returns the full grid's argmax (tests:
+exact on random sums of Gaussians, where loss is known, and a constructed miss when the window is too small).
 For radar profiles loss is the fall of the point-spread function along z: the frequencies set it (two
 frequencies: the beat of period c / (2 (f2 - f1)); many: the range resolution c / (2 B)) and so does the
 aperture (its depth of focus, shortest at the nearest depth; off the array axis a depth step also leaves the
@@ -28,8 +29,8 @@ candidate_margin_db (>= loss(dz / 2), tiny). Extended scenes can have peaks shar
 (interference); the margin covers that, and `bench.perf --section skips` measures it on the catalogue.
 
 Filter-aware skip: a pixel is kept by the filter iff max_z |V| >= G 10^(-thr/20) with G the image maximum.
-Under the condition above, max_z |V| <= coarse_max 10^(candidate_db/20), and G >= G_coarse, so a pixel whose
-coarse maximum is below G_coarse 10^(-(thr + candidate_db)/20) cannot be kept: it is not refined, its depth is NaN
+Under the condition above, max_z |V| <= coarse_max 10^(window/20), and G >= G_coarse, so a pixel whose
+coarse maximum is below G_coarse 10^(-(thr + window)/20) cannot be kept: it is not refined, its depth is NaN
 and its magnitude the coarse maximum (a lower bound; it stays below the filter).
 """
 from __future__ import annotations
@@ -50,17 +51,29 @@ BATCH_POINTS = 1 << 16                             # points per evaluate call (1
 
 @dataclass(frozen=True)
 class SearchPlan:
-    """Per searched pixel: coarse step in fine samples (N,) int and candidate window in dB (N,); the point-target
-    loss at half the step (N,) dB."""
+    """Per searched pixel (N,): the coarse step in fine samples, and `loss_curve_db` (N, n_max): the point-target
+    loss at k dz / 2 for k = 1..n_max (the candidate window of a level of spacing k is loss_curve_db[:, k - 1] +
+    `margin_db`)."""
 
     step: np.ndarray
-    candidate_db: np.ndarray
-    loss_db: np.ndarray
+    loss_curve_db: np.ndarray
+    margin_db: float = 0.0
+
+    def candidate_db(self, spacing: np.ndarray) -> np.ndarray:
+        """Candidate window (N,) dB of a level whose samples are `spacing` (N,) fine samples apart."""
+        k = np.clip(spacing, 1, self.loss_curve_db.shape[1]) - 1
+        return self.loss_curve_db[np.arange(len(k)), k] + self.margin_db
 
     @staticmethod
     def every_sample(n_px: int) -> "SearchPlan":
         """Step 1 everywhere: every fine sample is evaluated (the full search over the given depths)."""
-        return SearchPlan(np.ones(n_px, dtype=int), np.zeros(n_px), np.zeros(n_px))
+        return SearchPlan(np.ones(n_px, dtype=int), np.zeros((n_px, 1)))
+
+    @staticmethod
+    def uniform(n_px: int, step: int, loss_curve_db: np.ndarray, margin_db: float = 0.0) -> "SearchPlan":
+        """The same step and loss curve (n_max,) for every pixel."""
+        curve = np.asarray(loss_curve_db, dtype=float)
+        return SearchPlan(np.full(n_px, step), np.broadcast_to(curve, (n_px, len(curve))), margin_db)
 
 
 @dataclass
@@ -98,7 +111,7 @@ def point_target_loss_db(freqs_hz: np.ndarray, antennas: AntennaArray, points_m:
     return worst
 
 
-PROBE_RADII_M = (0.0, 0.04, 0.08, 0.12, 0.16, 0.22)   # lateral distances of the probe targets from the axis
+PROBE_RADII_M = tuple(np.round(np.arange(0.0, 0.2201, 0.02), 3))   # probe distances from the array axis, m
 
 
 @functools.lru_cache(maxsize=32)
@@ -133,15 +146,14 @@ def plan_search(freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray, y
     _ANTENNAS.setdefault(key, antennas)
     loss = _loss_by_radius(tuple(np.asarray(freqs_hz, dtype=np.float64).tolist()), key, round(float(z_near_m), 6),
                            float(dz_m), n_max)                                  # (radii, n_max)
-    ok = loss <= max_loss_db
+    # a pixel between two probe radii takes the larger loss of the two (the loss grows off axis, not strictly)
+    bracket = np.maximum(loss, np.vstack([loss[:1], loss[:-1]]))               # (radii, n_max)
+    ok = bracket <= max_loss_db
     best = np.where(ok.any(axis=1), n_max - np.argmax(ok[:, ::-1], axis=1), 1)  # largest k with loss <= max
     step_by_radius = np.minimum.accumulate(best[::-1])[::-1]                  # monotone: never larger farther out
-    loss_by_radius = loss[np.arange(len(best)), step_by_radius - 1]
     radius = np.hypot(x_m, y_m)
     ring = np.minimum(np.searchsorted(np.asarray(PROBE_RADII_M), radius - 1e-12), len(PROBE_RADII_M) - 1)
-    step = step_by_radius[ring]
-    loss_db = loss_by_radius[ring]
-    return SearchPlan(step=step.astype(int), candidate_db=loss_db + margin_db, loss_db=loss_db)
+    return SearchPlan(step=step_by_radius[ring].astype(int), loss_curve_db=bracket[ring], margin_db=margin_db)
 
 
 def _coarse_indices(n_z: int, step: int) -> np.ndarray:
@@ -182,6 +194,9 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
                  ) -> SearchResult:
     """Coarse-to-fine depth peak (module doc) of the pixels (x_m, y_m) (N,) over the equidistant depths z_m (n_z,).
 
+    Refinement halves the spacing level by level (ceil(s / 2)): around each candidate c of a level of spacing s,
+    c +- ceil(s / 2) are evaluated, and the candidates of the new level are the evaluated samples within its
+    window (loss at half the new spacing + margin) of the pixel's maximum so far; at spacing 1 the climb ends it.
     A peak on a depth edge of z_m that is not an edge of the grid (`z_edges_are_grid_edges` False there: the ROI
     cut the grid) gives NaN: the pixel's peak may lie outside the ROI. With step 1 every sample is evaluated.
     """
@@ -189,25 +204,28 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
 
     n_z, n_px = len(z_m), len(x_m)
     dz_m = float(z_m[1] - z_m[0]) if n_z > 1 else 1.0
-    step = np.minimum(plan.step, max(n_z - 1, 1))
+    spacing = np.minimum(plan.step, max(n_z - 1, 1))
     samples = _Samples(evaluate, x_m, y_m, z_m)
-    coarse_max = samples.run_coarse(step)
-    ratio = 10.0 ** (-plan.candidate_db / 20.0)                               # (N,)
+    coarse_max = samples.run_coarse(spacing)
+    window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)                     # (N,)
     active = coarse_max > 0
     if threshold_db is not None and active.any():
-        active &= coarse_max >= coarse_max.max() * 10.0 ** (-threshold_db / 20.0) * ratio
-    need = np.zeros((n_z, n_px), dtype=bool)
-    for s in np.unique(step[active]):
-        if s == 1:
-            continue
-        pix = np.flatnonzero(active & (step == s))
-        k_c = _coarse_indices(n_z, int(s))
-        candidates = samples.mag[np.ix_(k_c, pix)] >= (coarse_max[pix] * ratio[pix])[None]
-        for j, k in enumerate(k_c):
-            need[max(0, k - s + 1): k + s, pix[candidates[j]]] = True
-    need &= samples.mag < 0
-    p_need, k_need = np.nonzero(need.T)                    # pixel-major, as above
-    samples.run(k_need, p_need)
+        active &= coarse_max >= coarse_max.max() * 10.0 ** (-threshold_db / 20.0) * window
+    spacing = np.where(active, spacing, 1)
+    while (spacing > 1).any():
+        best = samples.mag.max(axis=0)                                         # unevaluated: -1, never the max
+        candidates = (samples.mag >= (best * window)[None]) & (spacing > 1)[None]
+        k, p = np.nonzero(candidates)
+        spacing = np.where(spacing > 1, (spacing + 1) // 2, spacing)
+        half = spacing[p]
+        k_new = np.concatenate([k - half, k + half])
+        p_new = np.concatenate([p, p])
+        inside = (k_new >= 0) & (k_new < n_z)
+        k_new, p_new = k_new[inside], p_new[inside]
+        fresh = samples.mag[k_new, p_new] < 0
+        key = np.unique(p_new[fresh].astype(np.int64) * n_z + k_new[fresh])     # pixel-major, no duplicates
+        samples.run(key % n_z, key // n_z)
+        window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)
     _climb(samples, active)
     depth_m = np.full(n_px, np.nan)
     max_proj = coarse_max.astype(np.float64)

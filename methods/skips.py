@@ -9,7 +9,8 @@ within 0.1 mm on >= 99 % of the pixels valid in both and every metric within 1 %
 * `mask_bb_depth`: ... and only depths inside its z bounds (BP searches no depth outside them; the other methods
   drop depths outside them). Not exact for two-frequency BP: a pixel whose strongest depth lies outside the box
   can have a weaker local peak inside it, which the full computation never reports (measured 98.2 % agreement on
-  the plate, notes/skips.md).
+  the plate); and a depth dropped at the box's edge changes the metrics' triangulation of its in-box neighbours
+  (notes/skips.md).
 * `coarse_roi`: BP without a sensor prior evaluates only the object's pixels and depth range, bounded by a coarse
   pass on a pixel lattice (methods.bp_search.coarse_roi) with the margins below.
 * `bp_coarse_to_fine`: BP searches each pixel's depth on a coarse step first and refines around the candidates;
@@ -41,18 +42,20 @@ class SkipSettings:
     bp_coarse_to_fine: bool = False
     bp_range_cpu: bool = False
     fsk_keep: bool = False
-    lattice_step_m: float = 0.003     # coarse passes sample a pixel every 3 mm in x and y (1/9 of 1 mm pixels)
+    lattice_step_m: float = 0.003     # fsk_keep's lattice: a pixel every 3 mm in x and y (1/9 of 1 mm pixels)
     keep_margin_db: float = 10.0      # a lattice pixel marks its neighbourhood when within threshold + 10 dB of the max
     lattice_margin_m: float = 0.002   # the lattice neighbourhood: one lattice step + 2 mm in x and y
-    roi_margin_m: float = 0.02        # the coarse ROI's depth range: lattice peaks +- (coarse step + 2 cm)
-    psf_max_loss_db: float = 1.0      # coarse depth step: largest with <= 1 dB point-target loss at half a step
+    roi_lattice_step_m: float = 0.004  # coarse_roi's lattice (BP): a pixel every 4 mm (1/16 of 1 mm pixels) ...
+    roi_keep_margin_db: float = 6.0   # ... marking its neighbourhood when within threshold + 6 dB of the max
+    roi_margin_m: float = 0.01        # the coarse ROI's depth range: lattice peaks +- (lattice depth step + 1 cm)
+    psf_max_loss_db: float = 3.0      # coarse depth step: largest with <= 3 dB point-target loss at half a step
     max_coarse_step_m: float = 0.01   # ... and at most 1 cm
     candidate_margin_db: float = 1.0  # refine coarse samples within (that loss + 1 dB) of the pixel's coarse max
 
-    def lattice_px(self, pixel_pitch_m: float) -> tuple[int, int]:
-        """(lattice step, neighbourhood half-width) in pixels of `pixel_pitch_m`: a step of 1 means no lattice (the
-        pixels are already coarser than the lattice)."""
-        step = max(1, int(round(self.lattice_step_m / pixel_pitch_m)))
+    def lattice_px(self, pixel_pitch_m: float, step_m: float | None = None) -> tuple[int, int]:
+        """(lattice step, neighbourhood half-width) in pixels of `pixel_pitch_m` for a lattice of `step_m` (default
+        `lattice_step_m`): a step of 1 means no lattice (the pixels are already coarser than the lattice)."""
+        step = max(1, int(round((step_m or self.lattice_step_m) / pixel_pitch_m)))
         return step, step + int(np.ceil(self.lattice_margin_m / pixel_pitch_m - 1e-9))
 
     @property
@@ -74,12 +77,15 @@ PRESETS = ("none", "auto", "all")
 
 def default_for(method: str, n_freqs: int) -> SkipSettings:
     """The skips on by default (`roi=auto`) for a method and frequency count: those measured to agree with the full
-    computation on every catalogue object (notes/skips.md). Two-frequency BP keeps its depth search outside the
-    mask_bb depth bounds (see `mask_bb_depth`)."""
+    computation on every catalogue object and to save time (notes/skips.md). Two-frequency BP keeps its depth
+    search outside the mask_bb depth bounds (`mask_bb_depth` moved 2 % of its depths on the plate); 2FSK, 3FSK
+    and MM-2FSK keep their depths outside the depth bounds (dropping them changes which pixels the metrics'
+    triangulation keeps: up to 5 % on the tilted plate, for no time saved)."""
     if method == "bp":
-        return SkipSettings(mask_bb=True, mask_bb_depth=n_freqs > 3, coarse_roi=True, bp_coarse_to_fine=True,
+        many = n_freqs > 3
+        return SkipSettings(mask_bb=True, mask_bb_depth=many, coarse_roi=True, bp_coarse_to_fine=True,
                             bp_range_cpu=True)
-    return SkipSettings(mask_bb=True, mask_bb_depth=True, fsk_keep=True)
+    return SkipSettings(mask_bb=True, fsk_keep=True)
 
 
 def resolve(roi: str | Mapping | SkipSettings | None, method: str = "bp", n_freqs: int = 2) -> SkipSettings:

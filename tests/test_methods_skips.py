@@ -131,8 +131,8 @@ def _gaussian_profiles(centres_m: np.ndarray, amplitudes: np.ndarray, width_m: f
 @pytest.mark.parametrize("step", [2, 4, 7])
 def test_coarse_to_fine_finds_the_full_grids_peak_when_the_candidate_window_covers_the_loss(step, record_property):
     # Condition (methods.bp_search): a profile falls from any peak by at most loss(d) dB at distance d; then with
-    # candidate_db >= loss(step dz / 2) + loss(dz / 2) the search returns the full grid's argmax. For positive sums
-    # of equal-width Gaussians loss(d) = 20 log10(e) d^2 / (2 w^2) holds (Jensen at the stationary point).
+    # windows >= loss(half a level's spacing) + loss(dz / 2) the search returns the full grid's argmax. For positive
+    # sums of equal-width Gaussians loss(d) = 20 log10(e) d^2 / (2 w^2) holds (Jensen at the stationary point).
     rng = fresh_rng(record_property)
     n_px, width_m, dz_m = 400, 0.004, 0.001
     z_m = np.arange(0.25, 0.35 + 1e-9, dz_m)
@@ -143,9 +143,9 @@ def test_coarse_to_fine_finds_the_full_grids_peak_when_the_candidate_window_cove
 
     def loss_db(d_m):
         return 20 * np.log10(np.e) * d_m ** 2 / (2 * width_m ** 2)
-    window_db = loss_db(step * dz_m / 2) + loss_db(dz_m / 2)
     full = search_depth(evaluate, x, x * 0, z_m, SearchPlan.every_sample(n_px), threshold_db=6.0)
-    plan = SearchPlan(np.full(n_px, step), np.full(n_px, window_db), np.full(n_px, loss_db(step * dz_m / 2)))
+    curve = loss_db(np.arange(1, step + 1) * dz_m / 2)                     # loss at half of each level's spacing
+    plan = SearchPlan.uniform(n_px, step, curve, margin_db=loss_db(dz_m / 2))
     fast = search_depth(evaluate, x, x * 0, z_m, plan, threshold_db=6.0)
     full_m, fast_m = (filter_depth(r.depth_m, r.max_projection, 6.0) for r in (full, fast))   # as methods.bp does
     same(np.isfinite(full_m), np.isfinite(fast_m))
@@ -165,8 +165,8 @@ def test_coarse_to_fine_misses_a_peak_when_the_condition_fails():
         return np.exp(-((z - 0.254) ** 2) / (2 * 0.001 ** 2)) + 0.8 * np.exp(-((z - 0.298) ** 2) / (2 * 0.02 ** 2))
     x = np.zeros(1)
     full = search_depth(evaluate, x, x, z_m, SearchPlan.every_sample(1), threshold_db=None)
-    miss = search_depth(evaluate, x, x, z_m, SearchPlan(np.array([8]), np.array([0.0]), np.array([0.0])), None)
-    found = search_depth(evaluate, x, x, z_m, SearchPlan(np.array([8]), np.array([75.0]), np.array([69.0])), None)
+    miss = search_depth(evaluate, x, x, z_m, SearchPlan.uniform(1, 8, np.zeros(8)), None)
+    found = search_depth(evaluate, x, x, z_m, SearchPlan.uniform(1, 8, np.full(8, 75.0)), None)
     assert full.depth_m[0] == pytest.approx(0.254, abs=1e-4)
     assert miss.depth_m[0] == pytest.approx(0.298, abs=1e-3)
     assert found.depth_m[0] == full.depth_m[0]
