@@ -10,8 +10,9 @@ a per-pixel prior image (ny, nx) samples each pixel at prior + k dz, |k dz| <= b
 and pixels without a prior stay NaN.
 
 Region of interest and skips (methods.roi, methods.skips): with an ROI, only its pixels and depths are evaluated
-(the rest NaN); on the CPU the depth search can run coarse-to-fine with a filter-aware pixel skip and, with many
-frequencies, on range-compressed profiles (methods.bp_search, methods.range_cpu). With no ROI and no skip
+(the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device, through
+the point kernels) and, on the CPU with many frequencies, on range-compressed profiles (methods.bp_search,
+methods.range_cpu). With no ROI and no skip
 (`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
 from __future__ import annotations
@@ -87,11 +88,18 @@ def _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, devic
 
 def _evaluator(signal, freqs_hz, antennas, device, use_range, points_hull_m):
     """Frequency-summed correlation at points: the CPU range-compressed gather (table built once over the paths
-    of `points_hull_m`, the corners of every point the search may evaluate) or the API's per-frequency sum."""
+    of `points_hull_m`, the corners of every point the search may evaluate), the Warp point kernel summing on the
+    device (CUDA: tensor cores), or the API's per-frequency sum."""
     if use_range:
         table = range_cpu.range_table(signal, freqs_hz, *range_cpu.path_bounds_m(antennas.tx_m, antennas.rx_m,
                                                                                  points_hull_m))
         return lambda points_m: range_cpu.correlate_range_cpu(table, antennas.tx_m, antennas.rx_m, points_m)
+    if device != "cpu":              # Warp: the frequency sum on the device, only (N,) values come back
+        from methods import backend_warp
+        sig = np.ascontiguousarray(signal, dtype=np.complex64)
+        return lambda points_m: backend_warp.correlate_warp(sig, np.asarray(freqs_hz, dtype=np.float64),
+                                                            antennas.tx_m, antennas.rx_m, points_m, device=device,
+                                                            sum_freqs=True)
     return lambda points_m: correlate(signal, freqs_hz, antennas.tx_m, antennas.rx_m, points_m, sum_freqs=True,
                                       device=device)
 
@@ -204,9 +212,9 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
         z_outer = z_m                          # the depths today's computation searches (grid, or prior band)
         z_m = z_outer[roi.z_indices(z_outer)]
         roi_cuts = not roi.pixels.all() or len(z_m) != len(z_outer)
-        cpu_skips = skips.coarse_roi or skips.bp_coarse_to_fine or (skips.bp_range_cpu and
-                                                                    range_cpu.worth_it(freqs_hz))
-        if device == "cpu" and (roi_cuts or cpu_skips):
+        searched = skips.coarse_roi or skips.bp_coarse_to_fine or (device == "cpu" and skips.bp_range_cpu and
+                                                                   range_cpu.worth_it(freqs_hz))
+        if searched or (device == "cpu" and roi_cuts):
             depth_m, max_proj = _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi, skips,
                                                   threshold_db, device, timer, extra)
         elif roi_cuts:
