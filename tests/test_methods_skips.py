@@ -78,7 +78,7 @@ def test_roi_none_is_todays_2fsk_and_3fsk(scene):
 
 def test_roi_settings():
     assert resolve("none") == NONE and resolve("all") == ALL
-    assert resolve(None, "bp", 2) == default_for("bp", 2) and not default_for("bp", 2).mask_bb_depth
+    assert resolve(None, "bp", 2) == default_for("bp", 2) and not default_for("bp", 128).mask_bb_depth
     assert resolve({"name": "x", "preset": "none", "bp_coarse_to_fine": True}) == SkipSettings(bp_coarse_to_fine=True)
     with pytest.raises(ValueError, match="unknown roi setting"):
         resolve({"bogus": 1})
