@@ -9,9 +9,9 @@ share of the pixels valid in both that agree within 0.1 mm, valid pixels gained 
 the rule for being on by default: depth within 0.1 mm on >= 99 % of the pixels valid in both, every metric within
 1 % (relative; within 0.001 cm where the full value is below 0.1 cm).
 
-Variants: `alone` (each skip alone; `auto` and `all` together), or `--mode leave-one-out` (all skips on, then each
-one turned off: attributes each skip's share where the full computation of a variant alone is too slow, e.g. BP_max
-on the paper grid on the CPU). Full computations that are too slow here can be read from `--reference DIR`
+Variants: `alone` (each skip alone; `auto` and `all` together), or `--mode leave-one-out` (the default skips with
+one flipped: `auto-X` without a default skip X, `auto+X` with a skip X that is off by default; attributes each
+skip's share where a variant alone is too slow, e.g. BP_max on the paper grid on the CPU). Full computations that are too slow here can be read from `--reference DIR`
 (`<object>_<distance>_<cell>_<grid>.npz` holding `depth_m` on the compute grid: e.g. from `--make-reference`, the
 float64 direct sum on a CUDA device through CuPy); the full computation is then timed on `--full-planes` depth
 planes of the grid and scaled to all (marked in `full_timing`).
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import statistics
 import time
 from dataclasses import dataclass
@@ -76,11 +77,13 @@ def applicable(method: str, n_freqs: int) -> tuple[str, ...]:
 def variants(method: str, n_freqs: int, mode: str) -> list[tuple[str, SkipSettings]]:
     """(name, settings) of the variants measured beside the full computation."""
     names = applicable(method, n_freqs)
+    auto = default_for(method, n_freqs)
     if mode == "alone":
         out = [(n, ALL.only(n)) for n in names]
-    else:
-        out = [(f"all-{n}", SkipSettings(**{k: (k in names and k != n) for k in SKIP_NAMES})) for n in names]
-    return out + [("auto", default_for(method, n_freqs)), ("all", ALL)]
+    else:                            # the default with one skip flipped: off where it is on, on where it is off
+        out = [(f"auto{'-' if getattr(auto, n) else '+'}{n}", dataclasses.replace(auto, **{n: not getattr(auto, n)}))
+               for n in names]
+    return out + [("auto", auto), ("all", ALL)]
 
 
 def compare(full_m: np.ndarray, skip_m: np.ndarray, scores_full: dict, scores_skip: dict) -> Comparison:
