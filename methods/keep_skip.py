@@ -9,8 +9,8 @@ When it equals the full pass: every pixel the full pass keeps is evaluated (then
 pass's: the pixel of G is kept, so it is evaluated). That holds when no kept pixel lies farther than
 the neighbourhood from a lattice pixel within margin_db of its magnitude, i.e. when the magnitude image varies
 slowly against the lattice step: its lateral resolution (~4 mm for the QAR50 aperture at 30 cm, ~lambda z / (2 D))
-spans several 1 mm pixels, so a lattice of 3 mm with a 10 dB margin rarely misses a kept pixel (measured: 0-5 of
-~800-4500 kept pixels for 3FSK on the catalogue, none for 2FSK; 6 dB lost up to 12). Measured by
+spans several 1 mm pixels, so a lattice of 3 mm with a 10 dB margin rarely misses a kept pixel (measured: 0-7 of
+800-14500 kept pixels for 3FSK on the catalogue, none for 2FSK; 6 dB lost up to 12). Measured by
 `bench.perf --section skips` and tested on small grids. Steps and margins are set in metres and converted to the
 grid's pixels, so a coarse grid (pixels >= the lattice step) runs the full pass.
 """
