@@ -15,10 +15,16 @@ computed on another grid is resampled first, metrics.resample):
   silhouette;
 * off = share (%) of radar points off the silhouette (false positives: the paper's P never sees them), off_err
   their mean distance to the nearest ground-truth point.
-`faithful=True` reproduces the reference code for C_g, C_s, P and P_e instead: GT sampled at MAROON's
-half-voxel-shifted positions, radar points mapped to GT pixels by `floor(K p)` (two columns share a GT column), GT
-holes counted as errors of 1000 z mm, points projecting outside the image counted as 0 error, three-valid quads
-not triangulated, P_e on the radar's own validity mask eroded by round(mask_erosion / 4) pixels.
+`faithful=True` reproduces the reference code's C_g, C_s, P and P_e instead (README "The faithful profile"):
+* ground truth sampled at MAROON's shifted positions K^-1 (u + 0.5, v + 0.5) (up to one pixel off the pixel
+  centres at the far edges), triangulated with the reference's quad rule, restricted to mask_bb for C_g / C_s;
+* radar points triangulated with the reference's quad rule (metrics.triangulation 'maroon': three-valid quads
+  decided by the image's corner pixels), kept where the depth is valid and inside mask_bb (the source mask);
+* P: every such point maps to GT pixel floor(K p) (two columns share a GT column); it counts only where the radar's
+  source mask is set at that destination pixel; there e = 1000 z - D_gt mm with D_gt the splat of the triangulated
+  GT vertices (holes: 0, i.e. an error of 1000 z mm); points projecting outside the image count with error 0;
+* P_e: the same with the radar's validity mask eroded by round(mask_erosion / 4) pixels (source and destination
+  mask), the triangulation left as it was before the erosion.
 Values in centimetres; a metric is NaN (never a made-up number) when no point is left to compare, and `failure`
 then names the reason: a row with a failure is counted as a failed capture by the tables, never dropped.
 """
@@ -30,6 +36,7 @@ import numpy as np
 
 from bench.alignment import apply_transform
 from bench.capture import Capture, RadarGrid
+from bench.maroon import reference_mask_bb_m
 from metrics.chamfer import PointSet, nearest_distances_m, one_sided_chamfer_m
 from metrics.groundtruth import rasterise_depth_m
 from metrics.masks import (MAROON_RADAR_PITCH_MM, close_mask, erode_mask, erosion_kernel_mm, inside_mask_bb,
@@ -43,6 +50,16 @@ SCORE_COLUMNS = (*METRIC_COLUMNS, "off_pct", "off_err_cm", *COUNT_COLUMNS, "fail
 
 
 @dataclass
+class ReferenceGroundTruth:
+    """The reference code's ground truth (faithful profile): samples at MAROON's shifted positions."""
+
+    depth_m: np.ndarray           # (ny, nx) at K^-1 (u + 0.5, v + 0.5), NaN = no surface
+    points: PointSet              # its triangulated vertices ('maroon' quad rule) inside mask_bb, metres
+    splat_mm: np.ndarray          # (ny, nx) the triangulated vertices splatted at floor(K p), mm; 0 = hole
+    mask_bb_m: dict[str, float]   # with the viewer's legacy precedence (bench.maroon.reference_mask_bb_m)
+
+
+@dataclass
 class GroundTruth:
     """Ground truth of one capture on its metric grid; build once per capture, evaluate every method against it."""
 
@@ -53,7 +70,7 @@ class GroundTruth:
     eroded_silhouette: np.ndarray  # (ny, nx) bool: the silhouette eroded by the P_e kernel
     mask_bb_m: dict[str, float]
     mask_erosion: int
-    faithful_depth_m: np.ndarray  # (ny, nx) at MAROON's sample positions K^-1 (u + 0.5, v + 0.5)
+    reference: ReferenceGroundTruth
 
 
 def _pixel_points_m(grid: RadarGrid, depth_m: np.ndarray) -> np.ndarray:
@@ -61,11 +78,33 @@ def _pixel_points_m(grid: RadarGrid, depth_m: np.ndarray) -> np.ndarray:
     return np.stack([x_m, y_m, depth_m], axis=-1)
 
 
-def _maroon_sample_xy_m(grid: RadarGrid) -> tuple[np.ndarray, np.ndarray]:
+def maroon_sample_xy_m(grid: RadarGrid) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) in metres, each (ny, nx), where MAROON samples pixel (v, u): K^-1 (u + 0.5, v + 0.5) with its
+    orthographic K (MAROON_FORMAT.md 2.4, 4.2): -0.15 m at u = 0 but +0.151 m at u = 300 on the default grid."""
     k = grid.intrinsics()
     ny, nx = grid.image_shape
     u, v = np.meshgrid(np.arange(nx) + 0.5, np.arange(ny) + 0.5)
     return (u - k[0, 3]) / k[0, 0], (v - k[1, 3]) / k[1, 1]
+
+
+def _floor_pixels(grid: RadarGrid, x_m: np.ndarray, y_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """MAROON's pixel of radar-space points: (u, v) = floor(K p) (no clipping)."""
+    k = grid.intrinsics()
+    return (np.floor(k[0, 0] * x_m + k[0, 3]).astype(np.int64), np.floor(k[1, 1] * y_m + k[1, 3]).astype(np.int64))
+
+
+def _reference_ground_truth(depth_m: np.ndarray, grid: RadarGrid, mask_bb_m: dict[str, float]
+                            ) -> ReferenceGroundTruth:
+    x_m, y_m = maroon_sample_xy_m(grid)
+    used = triangulated_vertices(depth_m, TRIANGULATION_THRESHOLD_M, rule="maroon")
+    points_m = np.column_stack([x_m[used], y_m[used], depth_m[used]])
+    ny, nx = grid.image_shape
+    splat_mm = np.zeros((ny, nx))
+    u, v = _floor_pixels(grid, points_m[:, 0], points_m[:, 1])
+    inside = (u >= 0) & (u < nx) & (v >= 0) & (v < ny)
+    splat_mm[v[inside], u[inside]] = 1000.0 * points_m[inside, 2]
+    return ReferenceGroundTruth(depth_m=depth_m, points=PointSet(points_m[inside_mask_bb(points_m, mask_bb_m)]),
+                                splat_mm=splat_mm, mask_bb_m=mask_bb_m)
 
 
 def pixel_pitch_mm(grid: RadarGrid) -> float:
@@ -82,16 +121,18 @@ def ground_truth(capture: Capture, grid: RadarGrid) -> GroundTruth:
         raise ValueError(f"{capture.path}: alignment has no 'photogrammetry2radar' transform")
     vertices_m = apply_transform(capture.transforms["photogrammetry2radar"], capture.mesh.vertices)
     depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid)
-    faithful_depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid, xy_m=_maroon_sample_xy_m(grid))
+    reference_depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid, xy_m=maroon_sample_xy_m(grid))
     mask_bb_m = capture.metadata.mask_bb_m
     points_m = _pixel_points_m(grid, np.nan_to_num(depth_m))
     on_object = np.isfinite(depth_m) & inside_mask_bb(points_m.reshape(-1, 3), mask_bb_m).reshape(depth_m.shape)
     used = triangulated_vertices(depth_m, TRIANGULATION_THRESHOLD_M) & on_object
     kernel_px = kernel_px_for_pitch(erosion_kernel_mm(capture.metadata.mask_erosion), pixel_pitch_mm(grid))
     silhouette = close_mask(on_object, kernel_px)
+    reference = _reference_ground_truth(reference_depth_m, grid, reference_mask_bb_m(capture.metadata))
     return GroundTruth(grid=grid, depth_m=depth_m, points=PointSet(points_m[used]), silhouette=silhouette,
                        eroded_silhouette=erode_mask(silhouette, kernel_px), mask_bb_m=mask_bb_m,
-                       mask_erosion=capture.metadata.mask_erosion, faithful_depth_m=faithful_depth_m)
+                       mask_erosion=capture.metadata.mask_erosion,
+                       reference=reference)
 
 
 def _mean_abs_cm(depth_m: np.ndarray, gt_depth_m: np.ndarray, compared: np.ndarray) -> float:
@@ -100,20 +141,25 @@ def _mean_abs_cm(depth_m: np.ndarray, gt_depth_m: np.ndarray, compared: np.ndarr
     return float(np.mean(np.abs(depth_m[compared] - gt_depth_m[compared])) * 100.0)
 
 
-def _reference_projective_cm(depth_m: np.ndarray, selected: np.ndarray, gt: GroundTruth) -> float:
-    """The reference code's P: floor(K p) mapping, GT holes 1000 z mm, off-image points 0 (both counted)."""
-    if not selected.any():
-        return float("nan")
-    k = gt.grid.intrinsics()
+def reference_projective(depth_m: np.ndarray, used: np.ndarray, source_mask: np.ndarray, gt: GroundTruth
+                         ) -> tuple[float, int]:
+    """The reference code's projective error (cm) and its number of counted points.
+
+    Points: `used & source_mask` at the exact pixel centres; each maps to pixel floor(K p). Outside the image it
+    counts with error 0; inside it counts only where `source_mask` is set at that pixel, with
+    e = 1000 z - splat (mm, splat 0 at GT holes)."""
+    selected = used & source_mask
     x_m, y_m = gt.grid.pixel_xy_m()
-    u = np.floor(k[0, 0] * x_m[selected] + k[0, 3]).astype(int)
-    v = np.floor(k[1, 1] * y_m[selected] + k[1, 3]).astype(int)
+    u, v = _floor_pixels(gt.grid, x_m[selected], y_m[selected])
     ny, nx = gt.grid.image_shape
     inside = (u >= 0) & (u < nx) & (v >= 0) & (v < ny)
+    counted = ~inside
+    counted[inside] = source_mask[v[inside], u[inside]]
     errors_mm = np.zeros(u.size)                                # outside the image: 0, counted (reference bug)
-    gt_mm = np.nan_to_num(gt.faithful_depth_m[v[inside], u[inside]] * 1000.0)   # holes: 0 mm (reference bug)
-    errors_mm[inside] = depth_m[selected][inside] * 1000.0 - gt_mm
-    return float(np.mean(np.abs(errors_mm)) / 10.0)
+    errors_mm[inside] = depth_m[selected][inside] * 1000.0 - gt.reference.splat_mm[v[inside], u[inside]]
+    if not counted.any():
+        return float("nan"), 0
+    return float(np.mean(np.abs(errors_mm[counted])) / 10.0), int(counted.sum())
 
 
 def _failure(depth_m: np.ndarray, used: np.ndarray, selected: np.ndarray, scores: dict) -> str:
@@ -134,17 +180,20 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
     depth_m = np.asarray(depth_m, dtype=np.float64)
     if depth_m.shape != gt.grid.image_shape:
         raise ValueError(f"depth map {depth_m.shape} does not match the ground-truth grid {gt.grid.image_shape}")
-    used = triangulated_vertices(depth_m, TRIANGULATION_THRESHOLD_M, three_valid_quads=not faithful)
+    used = triangulated_vertices(depth_m, TRIANGULATION_THRESHOLD_M, rule="maroon" if faithful else "sound")
     points_m = _pixel_points_m(gt.grid, np.nan_to_num(depth_m))
-    selected = used.copy()
-    selected[used] = inside_mask_bb(points_m[used], gt.mask_bb_m)
+    valid = np.isfinite(depth_m) & (depth_m != 0)
+    mask_bb_m = gt.reference.mask_bb_m if faithful else gt.mask_bb_m
+    source_mask = valid & inside_mask_bb(points_m.reshape(-1, 3), mask_bb_m).reshape(valid.shape)
+    selected = used & source_mask
     radar_points_m = points_m[selected]
     has_gt = np.isfinite(gt.depth_m)
     off = selected & ~gt.silhouette
+    gt_points = gt.reference.points if faithful else gt.points
     if faithful:
-        eroded = selected & erode_mask(np.isfinite(depth_m), radar_erosion_kernel_px(gt.mask_erosion))
-        p_px, p_e_px = int(selected.sum()), int(eroded.sum())
-        p_cm, p_e_cm = _reference_projective_cm(depth_m, selected, gt), _reference_projective_cm(depth_m, eroded, gt)
+        eroded_mask = source_mask & erode_mask(valid, radar_erosion_kernel_px(gt.mask_erosion))
+        p_cm, p_px = reference_projective(depth_m, used, source_mask, gt)
+        p_e_cm, p_e_px = reference_projective(depth_m, used, eroded_mask, gt)
     else:
         on, on_eroded = selected & gt.silhouette & has_gt, selected & gt.eroded_silhouette & has_gt
         p_px, p_e_px = int(on.sum()), int(on_eroded.sum())
@@ -153,12 +202,12 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
     off_err_cm = (float(np.mean(nearest_distances_m(off_points_m, gt.points))) * 100.0
                   if len(off_points_m) and len(gt.points.points_m) else float("nan"))
     scores = {
-        "C_g_cm": one_sided_chamfer_m(gt.points.points_m, PointSet(radar_points_m)) * 100.0,
-        "C_s_cm": one_sided_chamfer_m(radar_points_m, gt.points) * 100.0,
+        "C_g_cm": one_sided_chamfer_m(gt_points.points_m, PointSet(radar_points_m)) * 100.0,
+        "C_s_cm": one_sided_chamfer_m(radar_points_m, gt_points) * 100.0,
         "P_cm": p_cm, "P_e_cm": p_e_cm,
         "off_pct": 100.0 * off.sum() / selected.sum() if selected.any() else float("nan"),
         "off_err_cm": off_err_cm,
-        "C_g_px": len(gt.points.points_m), "C_s_px": len(radar_points_m), "P_px": p_px, "P_e_px": p_e_px,
+        "C_g_px": len(gt_points.points_m), "C_s_px": len(radar_points_m), "P_px": p_px, "P_e_px": p_e_px,
         "off_px": int(off.sum()), "outside_bb_px": int((used & ~selected).sum()),
     }
     scores["failure"] = _failure(depth_m, used, selected, scores)
