@@ -8,6 +8,7 @@ the result store first (bench.store) and only missing cells are computed. Multir
 """
 from __future__ import annotations
 
+import collections
 import functools
 import logging
 import os
@@ -27,6 +28,7 @@ from bench import cli, maroon
 from bench.antennas import load_antenna_array
 from bench.capture import Capture, RadarGrid
 from bench.errors import DatasetError
+from bench.frames import parse_frame_spec, select_frames
 from bench.grids import grid_for
 from bench.results import write_depth, write_results
 from bench.store import Store, capture_files, code_version, write_arrays
@@ -95,6 +97,21 @@ def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_f
                                antennas=load_antenna_array(*antenna_files))
 
 
+def _frames(capture_dir: Path, spec) -> list[int]:
+    """The radar frame indices `dataset.frame` selects in this capture (bench.frames)."""
+    radar_dir = maroon.find_radar_folder(capture_dir)
+    return select_frames(maroon.list_radar_frames(radar_dir), spec, radar_dir / "calibrated_data")
+
+
+def _pairing_columns(capture: Capture, capture_dir: Path) -> dict:
+    """The RealSense frame paired with the radar frame and its time offset (ms), for a RealSense prior's row."""
+    if capture.realsense is None:
+        return {}
+    pairing = maroon.realsense_pairing(capture_dir / "realsense", capture.radar.timestamp_s)
+    return {"realsense_frame": capture.realsense.index, "pairing": pairing.rule,
+            "realsense_offset_ms": pairing.offset_s * 1e3}
+
+
 def _container(node):
     return None if node is None else OmegaConf.to_container(node)
 
@@ -111,17 +128,28 @@ def _cell(cfg: DictConfig, device: str) -> dict:
     return {"method": cfg.method.name, "params": OmegaConf.to_container(cfg.method.params), "roi": _roi(cfg),
             "f_ghz": _container(cfg.freq.f_ghz), "prior": cfg.prior.name,
             "scalar_prior_m": float(cfg.prior.scalar_m), "grid": _container(cfg.grid.override),
-            "threshold_db": float(cfg.threshold_db), "frame": int(cfg.dataset.frame),
+            "threshold_db": float(cfg.threshold_db),
             "empty_filtered": bool(cfg.dataset.empty_filtered), "faithful": bool(cfg.metrics.faithful),
             "device": device, "code": code_version()}
 
 
-@functools.lru_cache(maxsize=16)   # one ray cast, silhouette and KD-tree per capture for every cell of a worker
-def _ground_truth(capture_dir: Path, frame: int, empty_filtered: bool,
-                  antenna_files: tuple[str | None, str | None]) -> GroundTruth:
-    """The capture's ground truth on its metric grid (the frame's calibration grid), whatever the cell's prior."""
-    capture = _read_capture(capture_dir, frame, ("radar", "mesh"), empty_filtered, antenna_files)
-    return ground_truth(capture, capture.radar.grid)
+_GROUND_TRUTHS: collections.OrderedDict = collections.OrderedDict()
+GROUND_TRUTHS_KEPT = 16
+
+
+def _ground_truth(capture_dir: Path, capture: Capture) -> GroundTruth:
+    """The capture's ground truth on its metric grid (the frame's calibration grid), whatever the cell's prior.
+
+    One ray cast, silhouette and KD-tree per capture, grid and object pose for every cell and frame of a process
+    (the basic launcher runs a sweep's jobs in one process): a static object's frames share it."""
+    pose = capture.transforms.get("photogrammetry2radar")
+    key = (capture_dir, capture.radar.grid, None if pose is None else pose.tobytes())
+    if key not in _GROUND_TRUTHS:
+        _GROUND_TRUTHS[key] = ground_truth(capture, capture.radar.grid)
+        while len(_GROUND_TRUTHS) > GROUND_TRUTHS_KEPT:
+            _GROUND_TRUTHS.popitem(last=False)
+    _GROUND_TRUTHS.move_to_end(key)
+    return _GROUND_TRUTHS[key]
 
 
 def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str, gt: GroundTruth | None
@@ -176,26 +204,28 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     device = resolve_device(cfg.device)
     cell = _cell(cfg, device)
     grid_override = _container(cfg.grid.override)
-    frame, empty_filtered, parts = int(cfg.dataset.frame), bool(cfg.dataset.empty_filtered), _parts(cfg.prior.name)
+    spec = parse_frame_spec(OmegaConf.to_container(cfg.dataset.frame) if OmegaConf.is_list(cfg.dataset.frame)
+                            else cfg.dataset.frame)
+    empty_filtered, parts = bool(cfg.dataset.empty_filtered), _parts(cfg.prior.name)
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = []
-    for capture_dir in _capture_dirs(cfg.dataset, root):
+    for capture_dir, frame in ((d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)):
         key = hit = None
         if store is not None:
             files = capture_files(capture_dir, frame, parts, empty_filtered) + [Path(f) for f in _antenna_files(cfg)
                                                                                 if f is not None]
-            key = store.key({**cell, "capture": store.capture_digest(files)})
+            key = store.key({**cell, "frame": frame, "capture": store.capture_digest(files)})
             hit = store.get(key)
             if hit is not None and timing == "alone" and hit[0].get("timing") != "alone":
                 hit = None           # its runtime was measured beside other jobs (or not recorded): re-measure
         if hit is None:
             capture = _read_capture(capture_dir, frame, parts, empty_filtered, _antenna_files(cfg))
-            gt = None if capture.mesh is None else _ground_truth(capture_dir, frame, empty_filtered,
-                                                                 _antenna_files(cfg))
+            gt = None if capture.mesh is None else _ground_truth(capture_dir, capture)
             grid = capture.radar.grid
             row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index,
                    "method": cfg.method.name, "freq": cfg.freq.name, "prior": cfg.prior.name, "grid": cfg.grid.name,
-                   "metrics": "faithful" if cfg.metrics.faithful else "sound"}
+                   "metrics": "faithful" if cfg.metrics.faithful else "sound",
+                   "radar_time_s": capture.radar.timestamp_s, **_pairing_columns(capture, capture_dir)}
             scores, arrays = _compute(cfg, capture, grid_for(capture, grid_override), device, gt)
             row.update(scores, timing=timing, hostname=socket.gethostname(), code_version=cell["code"], key=key)
             if store is not None:

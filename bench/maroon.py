@@ -27,6 +27,7 @@ from bench.alignment import read_alignment
 from bench.antennas import N_STORED, USED, AntennaArray, load_antenna_array
 from bench.capture import CameraIntrinsics, Capture, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
 from bench.errors import DatasetError, display_path
+from bench.frames import Pairing, pair_nearest, realsense_times_s, select_frames, timing_files
 from bench.images import read_binary_mask, read_uint16_png
 from bench.jsonio import read_json
 from bench.limits import Limits, current_limits, too_large, use_limits
@@ -37,6 +38,7 @@ MESH_CANDIDATES = ("mesh_masked_smoothed.obj", "mesh_masked.obj", "mesh_smoothed
 # MAROON's configured reconstruction grid, used only when calibration.json has no entry for a frame (2.5, 7).
 CONFIG_GRID = RadarGrid(bb_min_m=(-0.15, -0.15, 0.25), bb_max_m=(0.15, 0.15, 0.40), size=(301, 301, 151))
 PARTS = ("radar", "realsense", "mesh")
+POSES_FOLDER = "poses"         # photogrammetry/poses/NNNNNN.json: a moving object's pose per radar frame
 MIN_FREQ_STEP_HZ = 1e6        # the smallest frequency step of a sweep (MAROON: 78.7 MHz)
 MIN_GRID_STEP_M = 1e-6         # a grid step below 1 um is no radar grid (and breaks MAROON's intrinsics)
 MAX_MESH_COORDINATE = 1e6      # |vertex| in the mesh file's units (metres or millimetres): beyond is no object
@@ -138,9 +140,8 @@ def read_metadata(capture_dir: Path) -> Metadata:
     if not isinstance(bb, dict) or set(bb) - set(_MASK_BB_KEYS):
         raise DatasetError(path, f"mask_bb must be a dict with keys among {', '.join(_MASK_BB_KEYS)}")
     mask_bb_m = {key: _number(path, value, f"mask_bb.{key}") for key, value in bb.items()}
-    if "mask_3d_threshold" in raw:  # legacy form of mask_bb.zmax (section 8): ours keeps zmax when both are given
-        legacy_zmax_m = _number(path, raw["mask_3d_threshold"], "mask_3d_threshold")
-        mask_bb_m.setdefault("zmax", legacy_zmax_m)
+    if "mask_3d_threshold" in raw and "zmax" not in mask_bb_m:  # legacy form of mask_bb.zmax (section 8)
+        mask_bb_m["zmax"] = _number(path, raw["mask_3d_threshold"], "mask_3d_threshold")
     if distance_m == 0.3 and "zmin" not in mask_bb_m:
         mask_bb_m["zmin"] = 0.26
     mask_bb_m.setdefault("zmax", 0.7)
@@ -156,16 +157,6 @@ def read_metadata(capture_dir: Path) -> Metadata:
     return Metadata(distance_m=distance_m, mask_erosion=erosion, mask_bb_m=mask_bb_m,
                     calibration=calibration if isinstance(calibration, str) else None,
                     labels=tuple(str(label) for label in labels) if isinstance(labels, list) else (), raw=raw)
-
-
-def reference_mask_bb_m(metadata: Metadata) -> dict[str, float]:
-    """`mask_bb` as the reference viewer applies it (faithful profile): a legacy `mask_3d_threshold` sets zmax
-    even where `mask_bb.zmax` is given too (the viewer migrates the threshold over it); read_metadata keeps the
-    explicit `mask_bb.zmax`, the newer field, instead."""
-    mask_bb_m = dict(metadata.mask_bb_m)
-    if "mask_3d_threshold" in metadata.raw:            # validated by read_metadata
-        mask_bb_m["zmax"] = float(metadata.raw["mask_3d_threshold"])
-    return mask_bb_m
 
 
 def alignment_path(capture_dir: Path, metadata: Metadata) -> Path:
@@ -450,13 +441,16 @@ def read_mesh(path: Path) -> Mesh:
 # ------------------------------------------------------------------------------------------------- capture
 def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, ...] = PARTS,
                  empty_filtered: bool = False, antennas: AntennaArray | None = None,
-                 limits: Limits | None = None) -> Capture:
+                 limits: Limits | None = None, realsense_frame: int | None = None) -> Capture:
     """Read one capture folder `root/object/distance` into a Capture.
 
     `frame` is the radar frame index (-1 = last, as MAROON evaluates); `parts` chooses what to load. The radar is
     required when asked for; a missing RealSense or photogrammetry folder leaves that part None with a note,
-    while a present but malformed file raises. Every file must lie inside the capture's dataset root
-    (bench.safe_io) and within `limits` (default: bench.limits.current_limits()).
+    while a present but malformed file raises. The RealSense frame is `realsense_frame`, or by default the one
+    nearest in time to the radar frame (bench.frames; MAROON's last frame without timestamps). A moving object's
+    mesh pose at the radar frame (`photogrammetry/poses/NNNNNN.json`, written by the synthetic sequences) replaces
+    `photogrammetry2radar`. Every file must lie inside the capture's dataset root (bench.safe_io) and within
+    `limits` (default: bench.limits.current_limits()).
     """
     capture_dir = Path(capture_dir)
     unknown = set(parts) - set(PARTS)
@@ -472,7 +466,7 @@ def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, 
         if problem is not None:
             raise DatasetError(folder, f"cannot name a capture in results: {problem}")
     with use_limits(limits), safe_io.use_root(capture_dir):
-        return _read_capture(capture_dir, frame, parts, empty_filtered, antennas)
+        return _read_capture(capture_dir, frame, parts, empty_filtered, antennas, realsense_frame)
 
 
 def _check_erosion_kernel(capture_dir: Path, metadata: Metadata, grid: RadarGrid) -> None:
@@ -489,7 +483,7 @@ def _check_erosion_kernel(capture_dir: Path, metadata: Metadata, grid: RadarGrid
 
 
 def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
-                  antennas: AntennaArray | None) -> Capture:
+                  antennas: AntennaArray | None, realsense_frame: int | None = None) -> Capture:
     metadata = read_metadata(capture_dir)
     align_path = alignment_path(capture_dir, metadata)
     if not (align_path.exists() or align_path.is_symlink()):
@@ -501,12 +495,13 @@ def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_f
                       antennas=antennas or load_antenna_array(), radar_frames=frames)
     if align_path.parent != capture_dir:
         capture.notes.append(f"alignment from fallback {align_path}")
+    index = select_frames(frames, frame, radar_dir / "calibrated_data")[0] if isinstance(frame, int) else None
+    if index is None:
+        raise ValueError(f"read_capture reads one frame; frame must be an integer, got {frame!r}")
+    pose_path = capture_dir / "photogrammetry" / POSES_FOLDER / f"{index:06d}.json"
+    if "mesh" in parts and (pose_path.parent.is_dir() or pose_path.parent.is_symlink()):
+        capture.transforms["photogrammetry2radar"] = frame_pose(pose_path)
     if "radar" in parts:
-        if not -len(frames) <= frame:
-            raise DatasetError(radar_dir / "calibrated_data", f"frame {frame} not present ({len(frames)} frames)")
-        index = frames[frame] if frame < 0 else frame
-        if index not in frames:
-            raise DatasetError(radar_dir / "calibrated_data", f"frame {index} not present (have {_frame_list(frames)})")
         grids = read_radar_grids(radar_dir)
         grid = grids.get(index)
         if grid is None:
@@ -517,7 +512,10 @@ def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_f
         capture.radar = read_radar_frame(radar_dir, index, grid, empty_filtered)
     if "realsense" in parts:
         if (capture_dir / "realsense").is_dir():
-            capture.realsense, notes = read_realsense(capture_dir / "realsense")
+            if realsense_frame is None:
+                stamp_s = None if capture.radar is None else capture.radar.timestamp_s
+                realsense_frame = realsense_pairing(capture_dir / "realsense", stamp_s).realsense_frame
+            capture.realsense, notes = read_realsense(capture_dir / "realsense", realsense_frame)
             capture.notes.extend(notes)
         else:
             capture.notes.append(f"{capture_dir / 'realsense'}: missing, no RealSense prior")
@@ -529,5 +527,61 @@ def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_f
     return capture
 
 
-def _frame_list(frames: list[int]) -> str:
-    return ", ".join(map(str, frames)) if len(frames) <= 8 else f"{frames[0]}..{frames[-1]}, {len(frames)} frames"
+def frame_pose(path: Path) -> np.ndarray:
+    """`photogrammetry2radar` of one radar frame from `photogrammetry/poses/NNNNNN.json` (alignment.json format):
+    the pose of a moving object at that frame (synthetic sequences; MAROON's objects stand still)."""
+    if not (path.exists() or path.is_symlink()):
+        raise DatasetError(path, "pose of this radar frame is missing (the capture has per-frame poses)")
+    transforms = read_alignment(path)
+    if "photogrammetry2radar" not in transforms:
+        raise DatasetError(path, "has no 'photogrammetry2radar' matrix")
+    return transforms["photogrammetry2radar"]
+
+
+def radar_timestamp_s(radar_dir: Path, index: int, empty_filtered: bool = False) -> float | None:
+    """Acquisition time (s) of one radar frame, `timestamp_us[0]` of its file (None when absent). Reads the
+    whole frame (a pickle); the reader's own path gets it from the RadarFrame instead."""
+    name = f"{index:06d}_emptyfiltered.npy" if empty_filtered else f"{index:06d}.npy"
+    with safe_io.use_root(radar_dir.parent):
+        stamps = load_pickled_dict(radar_dir / "calibrated_data" / name).get("timestamp_us")
+    if stamps is None:
+        return None
+    stamps = np.atleast_1d(np.asarray(stamps))
+    if not (stamps.size and np.issubdtype(stamps.dtype, np.number) and np.isfinite(stamps[0])):
+        return None
+    return float(stamps[0]) * 1e-6
+
+
+def realsense_pairing(realsense_dir: Path, radar_time_s: float | None) -> Pairing:
+    """The RealSense frame nearest in time to a radar frame taken at `radar_time_s` (bench.frames)."""
+    with safe_io.use_root(realsense_dir.parent):
+        return pair_nearest(radar_time_s, list_depth_frames(realsense_dir), realsense_times_s(realsense_dir))
+
+
+def files_read(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
+               realsense_frame: int | None = None) -> list[Path]:
+    """The files `read_capture` opens for this radar frame and these parts (those that exist; the result store
+    hashes them). `realsense_frame` None pairs by time like read_capture (reading the radar frame's timestamp
+    when the capture has several RealSense frames)."""
+    capture_dir = Path(capture_dir)
+    metadata = read_metadata(capture_dir)
+    files = [capture_dir / "metadata.json", alignment_path(capture_dir, metadata)]
+    radar_dir = find_radar_folder(capture_dir)
+    index = select_frames(list_radar_frames(radar_dir), frame, radar_dir / "calibrated_data")[0]
+    frame_file = radar_dir / "calibrated_data" / (f"{index:06d}_emptyfiltered.npy" if empty_filtered
+                                                  else f"{index:06d}.npy")
+    if "radar" in parts:
+        files += [radar_dir / "calibration.json", frame_file]
+    realsense_dir = capture_dir / "realsense"
+    if "realsense" in parts and realsense_dir.is_dir():
+        if realsense_frame is None:
+            depth_frames = list_depth_frames(realsense_dir)
+            stamp_s = radar_timestamp_s(radar_dir, index, empty_filtered) if len(depth_frames) > 1 else None
+            realsense_frame = realsense_pairing(realsense_dir, stamp_s).realsense_frame
+            files += timing_files(realsense_dir) + ([frame_file] if "radar" not in parts else [])
+        files += [realsense_dir / "calibration.json", realsense_dir / "depth" / f"{realsense_frame:06d}.png",
+                  realsense_dir / "mask" / f"{realsense_frame:06d}.png"]
+    if "mesh" in parts and (capture_dir / "photogrammetry").is_dir():
+        files.append(find_mesh(capture_dir / "photogrammetry"))
+        files.append(capture_dir / "photogrammetry" / POSES_FOLDER / f"{index:06d}.json")
+    return [f for f in files if f.exists() or f.is_symlink()]   # a FIFO or dangling link is refused, not skipped

@@ -37,7 +37,7 @@ from bench import maroon, safe_io
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 CODE_DIRS = ("methods", "metrics")                                     # every .py file in these
 CODE_FILES = ("bench/maroon.py", "bench/capture.py", "bench/grids.py", "bench/alignment.py", "bench/antennas.py",
-              "bench/images.py", "bench/safe_pickle.py")               # the reader shapes results too
+              "bench/images.py", "bench/safe_pickle.py", "bench/frames.py")               # the reader shapes results too
 ARRAY_NAMES = ("depth_m", "magnitude", "gt_depth_m")
 RACY_S = 1.0            # a digest is cached only for files unchanged for this long before hashing (see above)
 _KIND_BY_SUFFIX = {".npy": "frame", ".json": "json", ".png": "image", ".obj": "mesh", ".ply": "mesh"}
@@ -79,33 +79,16 @@ def code_version() -> str:
     return f"{version('mm2fsk-bench')}+{digest.hexdigest()[:12]}"
 
 
-def capture_files(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool) -> list[Path]:
-    """The files `maroon.read_capture` opens for this frame and these parts (those that exist), each checked as
-    the reader checks it (regular file inside the dataset root, within its size limit: bench.safe_io)."""
+def capture_files(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
+                  realsense_frame: int | None = None) -> list[Path]:
+    """The files `maroon.read_capture` opens for this frame and these parts (the reader lists them:
+    `maroon.files_read`), each checked as the reader checks it (regular file inside the dataset root, within its
+    size limit: bench.safe_io)."""
     with safe_io.use_root(capture_dir) as roots:
-        files = _capture_files(capture_dir, frame, parts, empty_filtered)
+        files = maroon.files_read(capture_dir, frame, parts, empty_filtered, realsense_frame)
         for path in files:
             safe_io.file_size(path, file_kind(path), roots)
     return files
-
-
-def _capture_files(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool) -> list[Path]:
-    metadata = maroon.read_metadata(capture_dir)
-    files = [capture_dir / "metadata.json", maroon.alignment_path(capture_dir, metadata)]
-    if "radar" in parts:
-        radar_dir = maroon.find_radar_folder(capture_dir)
-        frames = maroon.list_radar_frames(radar_dir)
-        index = frames[frame] if frame < 0 else frame
-        name = f"{index:06d}_emptyfiltered.npy" if empty_filtered else f"{index:06d}.npy"
-        files += [radar_dir / "calibration.json", radar_dir / "calibrated_data" / name]
-    if "realsense" in parts and (capture_dir / "realsense").is_dir():
-        realsense_dir = capture_dir / "realsense"
-        index = maroon.list_depth_frames(realsense_dir)[-1]
-        files += [realsense_dir / "calibration.json", realsense_dir / "depth" / f"{index:06d}.png",
-                  realsense_dir / "mask" / f"{index:06d}.png"]
-    if "mesh" in parts and (capture_dir / "photogrammetry").is_dir():
-        files.append(maroon.find_mesh(capture_dir / "photogrammetry"))
-    return [f for f in files if f.exists() or f.is_symlink()]   # a FIFO or dangling link is refused, not skipped
 
 
 class Store:

@@ -5,7 +5,8 @@ Table I lists, per two-frequency configuration, the frequencies actually selecte
 Tables II and III (and the runtime table) summarise result rows per method x frequency configuration x prior x
 grid, metrics in centimetres, in the paper's row order. Counting rule: the table's captures are every capture
 any row was run on; a capture where a row has no row or a metric is undefined (`failure`) is a failed capture of
-that row, never a missing value. `ok` counts each row's successes; a row that failed anywhere is marked † (not
+that row, never a missing value. Frame sequences: a capture's frames are averaged first (a capture fails for a
+row when any of its frames does), then the captures. `ok` counts each row's successes; a row that failed anywhere is marked † (not
 comparable): its means cover only its successes and it is not ranked. Every other row is a mean over the same
 captures for every metric. The best value per metric among the comparable rows is in bold (BP_max excluded, as in
 the paper: it is the many-frequency reference, not a high-speed method). Runtimes are means over rows timed alone
@@ -30,6 +31,7 @@ METRICS_CM = ["C_g_cm", "C_s_cm", "P_cm", "P_e_cm"]
 METHOD_LABELS = {"bp": "BP", "2fsk": "2FSK", "3fsk": "3FSK", "mm2fsk": "MM-2FSK"}
 GROUP_COLUMNS = ["method", "freq", "prior", "grid"]
 CAPTURE_COLUMNS = ["object", "distance", "frame"]
+PER_CAPTURE = ["object", "distance"]           # frames of a capture are averaged first, then the captures
 FREQ_ORDER = ["full", *(name for name in CONFIGS_GHZ if name != "full")]       # BP_max first, as in the paper
 TITLES = {"table2": "Table II", "table3": "Table III", "runtime": "Runtime and error"}
 PRIOR_WORDS = {"photogrammetry": "the photogrammetry (ground-truth) prior", "realsense": "the RealSense prior",
@@ -89,17 +91,26 @@ def summarise(rows: pd.DataFrame) -> pd.DataFrame:
     rows = rows.copy()
     rows["_ok"] = succeeded(rows)
     rows["_alone"] = rows["timing"].eq("alone") if "timing" in rows else False
-    n_captures = len(rows[CAPTURE_COLUMNS].drop_duplicates())
+    frames = rows[CAPTURE_COLUMNS].drop_duplicates()
+    n_captures = len(frames[PER_CAPTURE].drop_duplicates())
+    frames_per_capture = frames.groupby(PER_CAPTURE).size()
     lines = []
     for keys, group in rows.groupby(GROUP_COLUMNS, sort=False):
         good = group[group._ok].drop_duplicates(CAPTURE_COLUMNS)
-        alone = group[group._alone]
-        line = dict(zip(GROUP_COLUMNS, keys), captures=n_captures, ok=len(good), comparable=len(good) == n_captures)
-        line.update({m: good[m].mean() if len(good) else float("nan") for m in METRICS_CM})
-        line["off_pct"] = good["off_pct"].mean() if "off_pct" in good and len(good) else float("nan")
+        # a capture counts when every frame of it that any row was run on succeeded; its frames are averaged
+        # first, so a capture with many frames weighs as much as one with a single frame
+        done = good.groupby(PER_CAPTURE).size()
+        complete = done[done == frames_per_capture.reindex(done.index)].index
+        good = good.set_index(PER_CAPTURE).loc[complete].reset_index()
+        per_capture = good.groupby(PER_CAPTURE)[[c for c in METRICS_CM + ["off_pct"] if c in good]].mean()
+        alone = group[group._alone].groupby(PER_CAPTURE).runtime_ms.mean()
+        ok = len(per_capture)
+        line = dict(zip(GROUP_COLUMNS, keys), captures=n_captures, ok=ok, comparable=ok == n_captures)
+        line.update({m: per_capture[m].mean() if ok else float("nan") for m in METRICS_CM})
+        line["off_pct"] = per_capture["off_pct"].mean() if "off_pct" in per_capture and ok else float("nan")
         line["off_err_cm"] = _weighted_off_error_cm(good)
-        line["runtime_ms"] = alone.runtime_ms.mean() if len(alone) else float("nan")
-        line["runtime_rows"] = len(alone)
+        line["runtime_ms"] = alone.mean() if len(alone) else float("nan")
+        line["runtime_rows"] = int(group._alone.sum())
         lines.append(line)
     summary = pd.DataFrame(lines)
     order = summary.method.map(list(METHOD_LABELS).index) * 100 + summary.freq.map(FREQ_ORDER.index)
