@@ -254,7 +254,10 @@ def progress_line(cfg: DictConfig, hydra_cfg: DictConfig, rows: list[dict], seco
     (job number of the sweep's jobs), `mm2fsk_d10_realsense: 2 captures, ... -> <run dir>` for a single run."""
     cell = hydra_cfg.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
     cached = sum(bool(row["cached"]) for row in rows)
-    captures = f"{len(rows)} capture{'s' if len(rows) != 1 else ''}"
+    n_captures = len({(row["object"], row["distance"]) for row in rows})
+    captures = f"{n_captures} capture{'s' if n_captures != 1 else ''}"
+    if len(rows) != n_captures:                  # frame sequences: one row per frame
+        captures += f" ({len(rows)} frames)"
     text = f"{cell}: {captures}, {len(rows) - cached} computed, {cached} cached, {seconds:.1f} s"
     if hydra_cfg.mode != RunMode.MULTIRUN:
         return f"{text} -> {hydra_cfg.runtime.output_dir}"

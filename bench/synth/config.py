@@ -25,7 +25,10 @@ class SynthConfig:
     """All generator settings. Lengths in metres unless the name says otherwise; angles in degrees."""
 
     seed: int = 0
-    frames: int = 1                          # frames per capture (radar and RealSense)
+    frames: int = 1                          # frames per capture (radar; RealSense as many when static)
+    motion: str = "static"                   # static | lateral | approach: the object's trajectory (motion.py)
+    motion_speed_m_s: float = 0.05           # speed of a moving object
+    radar_period_s: float = 0.1              # time between radar frames of a moving sequence (RealSense: 30 Hz)
     frequency_points: int = 128              # linspace(72 GHz, 82 GHz, frequency_points)
     # radar scene model
     sample_spacing_m: float = 0.9e-3         # surface samples at most this far apart (<= lambda/4 at 82 GHz)

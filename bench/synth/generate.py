@@ -22,7 +22,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from bench.antennas import load_antenna_array
-from bench.synth import depth_camera, ownership, writer
+from bench.synth import depth_camera, motion, ownership, writer
 from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
 from bench.synth.meshes import rotation_matrix
 from bench.synth.radar_model import clutter_frame, noise_frame, roughen, simulate_frame, surface_amplitudes
@@ -77,21 +77,22 @@ def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config:
     distance_m = distance_cm / 100.0
     scene = build_scene(object_name, distance_m)
     capture_dir.mkdir(parents=True)
-    timestamps_ns = [START_TIME_NS + i * FRAME_PERIOD_NS for i in range(config.frames)]
+    sequence = motion.plan(config, START_TIME_NS, FRAME_PERIOD_NS)    # frame times, object offsets per frame
 
     radar_rng = capture_rng(config, object_name, distance_cm, "radar")
     freqs = frequencies_hz(config)
-    for i, (raw, filtered) in enumerate(_radar_frames(scene, config, radar_rng)):
-        writer.write_radar_frame(capture_dir, i, raw, filtered, freqs, config.frames, timestamps_ns[i] // 1000)
+    for i, (raw, filtered) in enumerate(motion.radar_frames(_radar_frames, scene, config, sequence, radar_rng)):
+        writer.write_radar_frame(capture_dir, i, raw, filtered, freqs, config.frames,
+                                 sequence.radar_times_ns[i] // 1000)
     writer.write_radar_calibration(capture_dir, writer.radar_grid(distance_m), config.frames, config.frequency_points)
 
     camera_rng = capture_rng(config, object_name, distance_cm, "camera")
     nominal = depth_camera.nominal_pose(config)
     true_pose = depth_camera.perturbed_pose(nominal, config, camera_rng)
-    for i in range(config.frames):
-        frame = depth_camera.render(scene, true_pose, config, camera_rng)
+    for i, offset_m in enumerate(sequence.realsense_offsets_m):
+        frame = depth_camera.render(motion.moved(scene, offset_m), true_pose, config, camera_rng)
         writer.write_realsense_frame(capture_dir, i, frame.depth_mm, frame.mask, frame.rgb)
-    writer.write_realsense_meta(capture_dir, depth_camera.intrinsics(config), timestamps_ns)
+    writer.write_realsense_meta(capture_dir, depth_camera.intrinsics(config), sequence.realsense_times_ns)
 
     photo2radar = _photogrammetry2radar(capture_rng(config, object_name, distance_cm, "photogrammetry"))
     rs2radar = nominal.realsense2radar()
@@ -101,6 +102,7 @@ def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config:
                                          "photogrammetry2realsense": np.linalg.inv(rs2radar) @ photo2radar,
                                          "radar2world": np.array(RADAR2WORLD)})
     writer.write_metadata(capture_dir, distance_m, scene.label)
+    motion.write_poses(capture_dir, sequence, photo2radar)          # a moving object's ground truth per radar frame
 
 
 class _Manifest:
@@ -133,6 +135,7 @@ def _remove_stale_temporaries(object_dir: Path, distance_cm: int) -> None:
 
 def _check(object_name: str, distance_cm: int, config: SynthConfig) -> None:
     config.validate()
+    motion.validate(config)
     if object_name not in CATALOGUE:
         raise ValueError(f"unknown object {object_name!r}; known: {', '.join(CATALOGUE)}")
     if not DISTANCE_RANGE_CM[0] <= int(distance_cm) <= DISTANCE_RANGE_CM[1]:
