@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-GENERATOR_VERSION = "2"          # bump when the generator's output changes for an unchanged config
+GENERATOR_VERSION = "3"          # bump when the generator's output changes for an unchanged config
 C_M_PER_S = 299_792_458.0
 F_LOW_GHZ, F_HIGH_GHZ = 72.0, 82.0
 QUARTER_WAVELENGTH_M = C_M_PER_S / (F_HIGH_GHZ * 1e9) / 4.0   # 0.914 mm at 82 GHz
@@ -54,6 +54,31 @@ class SynthConfig:
     extrinsic_error_deg: float = 0.0
     background_wall: bool = True
     wall_distance_m: float = 1.0             # wall behind the objects (depth background, radar clutter plane)
+    # Effects of the realistic preset (bench/synth/README.md, "Effects"); every default below is the ideal generator.
+    # depth camera (D435 active stereo)
+    camera_materials: bool = False           # translucent plastic seen behind its surface, specular-metal holes/outliers
+    edge_fattening_px: int = 0               # foreground spreads this far over depth edges (mixed and flying pixels)
+    flying_pixel_fraction: float = 0.3       # share of the edge band given a depth between the two sides
+    slant_bias_px: float = 0.0               # disparity bias * tan(incidence): depth bias on slanted surfaces
+    # radar
+    radar_materials: bool = False            # Fresnel reflection and roughness of each part's material (materials.py)
+    scattering: str = "cosine"               # "cosine": area * cos^q law; "specular": lobe around the mirror direction
+    element_exponent: float = 0.0            # element pattern cos(theta)^q (amplitude, per antenna, off the +z axis)
+    transmission: bool = False               # back walls of partly transmissive parts (plastic shells) scatter too
+    channel_amplitude_db: float = 0.0        # per-channel (tx and rx) calibration residual, std of the gain in dB
+    channel_phase_deg: float = 0.0           # ... and of the phase in degrees
+    clutter_model: str = "points"            # "points": today's point clutter; "scene": wall image + the object's mount
+    wall_reflection: float = 0.25            # |Gamma| of the back wall at 77 GHz (plasterboard, ITU-R P.2040-3)
+    mount: bool = False                      # a wooden post below the object (seen by both sensors, not ground truth)
+    noise_model: str = "snr"                 # "snr": snr_db per sample; "datasheet": thermal noise k T F B vs link budget
+    tx_power_dbm: float = 0.0                # per transmitter (datasheet model)
+    element_gain_dbi: float = 6.0            # per antenna element
+    noise_figure_db: float = 12.0            # receiver
+    if_bandwidth_hz: float = 1.0e6           # 1 / dwell per frequency step and transmitter
+    amplitude_scale: float = 1.0             # calibrated-frame scale: multiplies every radar sample (see README)
+    # ground truth (photogrammetry mesh to radar registration residual)
+    gt_registration_mm: float = 0.0
+    gt_registration_deg: float = 0.0
 
     def validate(self) -> None:
         """Raise ValueError with a one-line message for settings that cannot produce a valid capture."""
@@ -68,6 +93,15 @@ class SynthConfig:
             (self.disparity_sigma_px >= 0 and self.stereo_baseline_m > 0, "depth noise parameters must be positive"),
             (0 < self.max_incidence_deg <= 90, "max_incidence_deg must be in (0, 90]"),
             (self.wall_distance_m >= 1.0, "wall_distance_m must be >= 1.0 m (clutter and wall behind every object)"),
+            (self.scattering in ("cosine", "specular"), "scattering must be 'cosine' or 'specular'"),
+            (self.clutter_model in ("points", "scene"), "clutter_model must be 'points' or 'scene'"),
+            (self.noise_model in ("snr", "datasheet"), "noise_model must be 'snr' or 'datasheet'"),
+            (self.edge_fattening_px >= 0 and 0 <= self.flying_pixel_fraction <= 1,
+             "edge_fattening_px must be >= 0 and flying_pixel_fraction in [0, 1]"),
+            (min(self.channel_amplitude_db, self.channel_phase_deg, self.element_exponent,
+                 self.gt_registration_mm, self.gt_registration_deg) >= 0, "effect strengths must be >= 0"),
+            (0 <= self.wall_reflection <= 1, "wall_reflection must be in [0, 1]"),
+            (self.amplitude_scale > 0 and self.if_bandwidth_hz > 0, "amplitude_scale and if_bandwidth_hz must be > 0"),
         ]
         for ok, message in checks:
             if not ok:
@@ -93,3 +127,43 @@ def capture_rng(config: SynthConfig, object_name: str, distance_cm: int, stream:
 def frequencies_hz(config: SynthConfig) -> np.ndarray:
     """The stepped frequencies of a frame, float64 Hz (the `fvec` written to every frame)."""
     return np.linspace(F_LOW_GHZ * 1e9, F_HIGH_GHZ * 1e9, config.frequency_points)
+
+
+PLATE_REFERENCE_DISTANCE_M = 0.30
+# Calibrated QAR frames are referenced to a metal-plate measurement, so a plate at the reference distance reads about
+# unity; our unscaled model gives a large plate |s| = lambda / (2 R) (its image source), hence this factor (~154).
+PLATE_AMPLITUDE_SCALE = 2.0 * PLATE_REFERENCE_DISTANCE_M / (C_M_PER_S / (0.5 * (F_LOW_GHZ + F_HIGH_GHZ) * 1e9))
+
+# Every effect of the realistic preset, with the settings that switch it off (back to the ideal generator's).
+EFFECTS: dict[str, dict] = {
+    "camera calibration residual": {"extrinsic_error_mm": 0.0, "extrinsic_error_deg": 0.0},
+    "camera materials": {"camera_materials": False},
+    "camera edge pixels": {"edge_fattening_px": 0},
+    "camera slant bias": {"slant_bias_px": 0.0},
+    "radar materials": {"radar_materials": False},
+    "specular scattering": {"scattering": "cosine"},
+    "element pattern": {"element_exponent": 0.0},
+    "transmission": {"transmission": False},
+    "channel residual": {"channel_amplitude_db": 0.0, "channel_phase_deg": 0.0},
+    "scene clutter": {"clutter_model": "points"},
+    "mount": {"mount": False},
+    "datasheet noise": {"noise_model": "snr"},
+    "ground-truth registration": {"gt_registration_mm": 0.0, "gt_registration_deg": 0.0},
+}
+
+PRESETS: dict[str, SynthConfig] = {
+    "ideal": SynthConfig(),
+    "realistic": SynthConfig(
+        extrinsic_error_mm=2.0, extrinsic_error_deg=0.5, camera_materials=True, edge_fattening_px=2,
+        slant_bias_px=0.3, radar_materials=True, scattering="specular", element_exponent=1.0, transmission=True,
+        channel_amplitude_db=0.5, channel_phase_deg=5.0, clutter_model="scene", mount=True, noise_model="datasheet",
+        amplitude_scale=PLATE_AMPLITUDE_SCALE, gt_registration_mm=1.0, gt_registration_deg=0.2),
+}
+DEFAULT_PRESET = "realistic"     # of the demo, the Hydra app and the committed results
+
+
+def preset(name: str, **overrides) -> SynthConfig:
+    """The named preset (`ideal`, `realistic`) with `overrides` applied; ValueError names the presets."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown synthetic preset {name!r}; known: {', '.join(PRESETS)}")
+    return dataclasses.replace(PRESETS[name], **overrides)

@@ -113,10 +113,56 @@ def _stereo_errors(z_m: np.ndarray, cos_inc: np.ndarray, config: SynthConfig, rn
         pad = [(0, 0), (0, 0)]
         pad[axis] = (1, 0)
         jump |= np.pad(step, pad) | np.pad(step, [(b, a) for a, b in pad])
-    if config.edge_hole_px > 0:
+    if config.edge_fattening_px > 0:
+        z = _edge_pixels(z, filled, jump, config, rng)
+        jump = np.zeros_like(jump)                  # the band is handled there: mixed, fattened or lost
+    elif config.edge_hole_px > 0:
         jump = ndimage.binary_dilation(jump, iterations=config.edge_hole_px)
     holes |= jump | (rng.random(z.shape) < config.dropout_fraction)
     z[holes] = np.nan
+    return z
+
+
+def _edge_pixels(z: np.ndarray, filled_m: np.ndarray, jump: np.ndarray, config: SynthConfig,
+                 rng: np.random.Generator) -> np.ndarray:
+    """Active stereo at depth edges: the correlation window straddles both surfaces, so within `edge_fattening_px`
+    of an edge a pixel takes the nearer surface's depth (foreground fattening, the usual block-matching artefact),
+    a depth between the two (`flying_pixel_fraction`: mixed or "flying" pixels), or none (30 %: left-right check)."""
+    size = 2 * config.edge_fattening_px + 1
+    band = ndimage.binary_dilation(jump, iterations=config.edge_fattening_px)
+    near_m = ndimage.minimum_filter(filled_m, size=size)
+    far_m = np.minimum(ndimage.maximum_filter(filled_m, size=size), 10.0)
+    draw = rng.random(z.shape)
+    flying = band & (draw < config.flying_pixel_fraction)
+    lost = band & (draw >= config.flying_pixel_fraction) & (draw < config.flying_pixel_fraction + 0.3)
+    fattened = band & ~flying & ~lost
+    out = z.copy()
+    out[flying] = (near_m + rng.random(z.shape) * (far_m - near_m))[flying]
+    out[fattened] = near_m[fattened] + (z - filled_m)[fattened].clip(-0.01, 0.01)   # keeps the pixel's noise
+    out[lost] = np.nan
+    return out
+
+
+def _slant_and_material_errors(z: np.ndarray, cos_inc: np.ndarray, geometry: np.ndarray, scene: Scene,
+                               config: SynthConfig, rng: np.random.Generator) -> np.ndarray:
+    """Depth bias on slanted surfaces and the errors of each part's material (bench.synth.materials)."""
+    from bench.synth.materials import MATERIALS
+
+    z = z.copy()
+    if config.slant_bias_px:
+        tan_inc = np.sqrt(1.0 - np.clip(cos_inc, 0.2, 1.0) ** 2) / np.clip(cos_inc, 0.2, 1.0)
+        z += z ** 2 * config.slant_bias_px * tan_inc / (config.focal_px * config.stereo_baseline_m)
+    if config.camera_materials:
+        draw = rng.random(z.shape)
+        for index, part in enumerate(scene.parts):
+            material = MATERIALS[part.material]
+            on_part = geometry == index
+            z[on_part] += material.subsurface_bias_m                   # translucent: the match lies below the surface
+            outlier = on_part & (draw < material.outlier_fraction)
+            z[outlier] += rng.uniform(0.02, 0.06, int(outlier.sum()))   # a mirrored surface, farther away
+            dropped = on_part & (draw >= material.outlier_fraction) & \
+                (draw < material.outlier_fraction + material.dropout_fraction)
+            z[dropped] = np.nan
     return z
 
 
@@ -132,8 +178,10 @@ def render(scene: Scene, pose: CameraPose, config: SynthConfig, rng: np.random.G
     """Depth (uint16 mm, 0 = invalid), object mask and RGB of `scene` seen from `pose` (the true pose)."""
     z_m, cos_inc, geometry = _cast(scene, pose, config)
     noisy_m = _stereo_errors(z_m, cos_inc, config, rng)
+    if config.slant_bias_px or config.camera_materials:
+        noisy_m = _slant_and_material_errors(noisy_m, cos_inc, geometry, scene, config, rng)
     depth_mm = np.where(np.isfinite(noisy_m), np.rint(noisy_m * 1000.0), 0)
     depth_mm = np.clip(depth_mm, 0, 65535).astype(np.uint16)
-    is_object = (geometry >= 0) & (geometry < len(scene.parts))
+    is_object = np.isin(geometry, [i for i, part in enumerate(scene.parts) if part.ground_truth])
     mask = np.where(is_object, 255, 0).astype(np.uint8)
     return DepthRender(depth_mm, mask, _shade(z_m, cos_inc, geometry, scene))

@@ -21,12 +21,9 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from bench.antennas import load_antenna_array
-from bench.synth import depth_camera, motion, ownership, writer
+from bench.synth import depth_camera, motion, ownership, radar_scene, writer
 from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
 from bench.synth.meshes import rotation_matrix
-from bench.synth.radar_model import clutter_frame, noise_frame, roughen, simulate_frame, surface_amplitudes
-from bench.synth.sampling import visible_samples
 from bench.synth.scenes import CATALOGUE, build_scene
 
 MANIFEST_NAME = ownership.MANIFEST_NAME
@@ -57,25 +54,27 @@ def _photogrammetry2radar(rng: np.random.Generator) -> np.ndarray:
 
 
 def _radar_frames(scene, config: SynthConfig, rng: np.random.Generator):
-    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame; the scene is static, noise is per frame."""
-    antennas = load_antenna_array(all_elements=True)
-    freqs = frequencies_hz(config)
-    samples = visible_samples([p.tris_m for p in scene.parts], config.sample_spacing_m)
-    reflectivity = np.array([p.reflectivity for p in scene.parts])
-    amplitudes = surface_amplitudes(samples, reflectivity, config)
-    obj = simulate_frame(roughen(samples, config, rng), amplitudes, antennas.tx_m, antennas.rx_m, freqs)
-    power = float(np.mean(np.abs(obj) ** 2))
-    clutter = (clutter_frame(antennas.tx_m, antennas.rx_m, freqs, config, power, rng) if config.clutter
-               else np.zeros_like(obj))
-    for _ in range(config.frames):
-        noise = noise_frame(obj.shape, power, config.snr_db, rng)
-        yield obj + clutter + noise, obj + noise
+    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame (bench.synth.radar_scene)."""
+    return radar_scene.frames(scene, config, rng)
+
+
+def _registration_residual(config: SynthConfig, rng: np.random.Generator) -> np.ndarray:
+    """4x4 radar-space error of the photogrammetry mesh's registration: a rotation of exactly `gt_registration_deg`
+    about a random axis through the radar origin and a shift of exactly `gt_registration_mm` in a random direction
+    (identity when both are 0; no random draw then, so the ideal generator's streams are unchanged)."""
+    if not (config.gt_registration_mm or config.gt_registration_deg):
+        return np.eye(4)
+    axis, direction = rng.normal(size=3), rng.normal(size=3)
+    return _rigid(rotation_matrix(axis, config.gt_registration_deg),
+                  direction / np.linalg.norm(direction) * config.gt_registration_mm * 1e-3)
 
 
 def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config: SynthConfig) -> None:
     """Write every file of one capture into `capture_dir` (which must not exist yet)."""
     distance_m = distance_cm / 100.0
     scene = build_scene(object_name, distance_m)
+    if config.mount:
+        scene = scene.with_mount()
     capture_dir.mkdir(parents=True)
     sequence = motion.plan(config, START_TIME_NS, FRAME_PERIOD_NS)    # frame times, object offsets per frame
 
@@ -94,9 +93,12 @@ def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config:
         writer.write_realsense_frame(capture_dir, i, frame.depth_mm, frame.mask, frame.rgb)
     writer.write_realsense_meta(capture_dir, depth_camera.intrinsics(config), sequence.realsense_times_ns)
 
-    photo2radar = _photogrammetry2radar(capture_rng(config, object_name, distance_cm, "photogrammetry"))
+    photo_rng = capture_rng(config, object_name, distance_cm, "photogrammetry")
+    photo2radar = _photogrammetry2radar(photo_rng)
     rs2radar = nominal.realsense2radar()
-    mesh_photo = (scene.tris_m - photo2radar[:3, 3]) @ photo2radar[:3, :3]     # R^T (p - t), row vectors
+    # the mesh is registered with a residual: the stored photogrammetry2radar maps it slightly off the true object
+    true_photo2radar = _registration_residual(config, photo_rng) @ photo2radar
+    mesh_photo = (scene.tris_m - true_photo2radar[:3, 3]) @ true_photo2radar[:3, :3]   # R^T (p - t), row vectors
     writer.write_mesh_obj(capture_dir / "photogrammetry" / "mesh_masked_smoothed.obj", mesh_photo)
     writer.write_alignment(capture_dir, {"realsense2radar": rs2radar, "photogrammetry2radar": photo2radar,
                                          "photogrammetry2realsense": np.linalg.inv(rs2radar) @ photo2radar,

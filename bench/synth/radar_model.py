@@ -30,11 +30,14 @@ def _exact_phasors(path_m: np.ndarray, freq_hz: float) -> np.ndarray:
 
 
 def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarray, rx_m: np.ndarray,
-                   freqs_hz: np.ndarray) -> np.ndarray:
+                   freqs_hz: np.ndarray, normals: np.ndarray | None = None, lobe_rad: np.ndarray | None = None,
+                   element_exponent: float = 0.0) -> np.ndarray:
     """Frame of point scatterers: complex64 (n_rx, n_tx, F) indexed [rx, tx, f].
 
     points_m (K, 3) radar space, amplitudes (K,) complex (reflectivity, without path loss), tx_m (n_tx, 3),
-    rx_m (n_rx, 3), freqs_hz (F,). Path loss 1 / (|p - tx| |p - rx|) is applied here.
+    rx_m (n_rx, 3), freqs_hz (F,). Path loss 1 / (|p - tx| |p - rx|) is applied here, and per leg (scatterer to
+    one antenna) the optional gains of `leg_gains`: the quasi-specular lobe (normals (K, 3), lobe_rad (K,)) and the
+    element pattern cos(theta)^element_exponent.
     """
     points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     amplitudes = np.asarray(amplitudes, dtype=np.complex128).reshape(-1)
@@ -46,19 +49,46 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
     with threadpool_limits(limits=1, user_api="blas"):
         for start in range(0, len(points_m), CHUNK_POINTS):
             chunk = slice(start, start + CHUNK_POINTS)
-            _accumulate(out, points_m[chunk], amplitudes[chunk], rx_m, tx_m, freqs_hz)
+            lobe = None if normals is None else (normals[chunk], lobe_rad[chunk])
+            _accumulate(out, points_m[chunk], amplitudes[chunk], rx_m, tx_m, freqs_hz, lobe, element_exponent)
     return np.ascontiguousarray(out.transpose(1, 2, 0))
 
 
+def leg_gains(points_m: np.ndarray, antennas_m: np.ndarray, normals: np.ndarray | None = None,
+              lobe_rad: np.ndarray | None = None, element_exponent: float = 0.0) -> np.ndarray:
+    """Amplitude gain (K, E) of each scatterer-antenna leg.
+
+    Quasi-specular lobe: exp(-theta^2 / (2 lobe^2)) with theta the angle between the facet normal and the direction
+    to the antenna. The product of the two legs is exp(-theta_b^2 / lobe^2) exp(-|theta_t - theta_r|^2 / (4 lobe^2)):
+    the lobe around the bisector of the transmit and receive directions (theta_b = (theta_t + theta_r) / 2, small
+    angles) times a bistatic-angle factor, the separable form that keeps the pair sum a matrix product.
+    Element pattern: cos(angle of the leg off the array normal +z)^element_exponent.
+    """
+    to_antenna = antennas_m[None] - points_m[:, None, :]                       # (K, E, 3)
+    distance = np.linalg.norm(to_antenna, axis=2)
+    gain = np.ones(distance.shape)
+    if normals is not None:
+        cos_leg = np.einsum("kec,kc->ke", to_antenna, normals) / distance
+        theta = np.arccos(np.clip(cos_leg, -1.0, 1.0))
+        gain *= np.exp(-0.5 * (theta / lobe_rad[:, None]) ** 2)
+    if element_exponent:
+        gain *= np.clip(-to_antenna[..., 2] / distance, 0.0, 1.0) ** element_exponent
+    return gain
+
+
 def _accumulate(out: np.ndarray, points_m: np.ndarray, amplitudes: np.ndarray, rx_m: np.ndarray, tx_m: np.ndarray,
-                freqs_hz: np.ndarray) -> None:
+                freqs_hz: np.ndarray, lobe=None, element_exponent: float = 0.0) -> None:
     """Add the contributions of a block of scatterers to out[f, rx, tx]."""
     n_rx = len(rx_m)
     steps_hz = np.diff(freqs_hz)
     equidistant = len(steps_hz) > 0 and np.allclose(steps_hz, steps_hz[0], rtol=1e-9, atol=1e-3)
     reseed = RESEED_STEPS if equidistant else 1
-    dist_m = np.linalg.norm(points_m[:, None, :] - np.concatenate([rx_m, tx_m])[None], axis=2)  # (k, n_rx + n_tx)
+    antennas_m = np.concatenate([rx_m, tx_m])
+    dist_m = np.linalg.norm(points_m[:, None, :] - antennas_m[None], axis=2)  # (k, n_rx + n_tx)
     weight = (1.0 / dist_m).astype(np.complex64)
+    if lobe is not None or element_exponent:
+        normals, lobe_rad = lobe if lobe is not None else (None, None)
+        weight *= leg_gains(points_m, antennas_m, normals, lobe_rad, element_exponent).astype(np.float32)
     weight[:, :n_rx] *= amplitudes[:, None].astype(np.complex64)
     step = _exact_phasors(dist_m, steps_hz[0]) if equidistant else None
     for n, freq_hz in enumerate(freqs_hz):
@@ -101,4 +131,66 @@ def clutter_frame(tx_m: np.ndarray, rx_m: np.ndarray, freqs_hz: np.ndarray, conf
 def noise_frame(shape: tuple[int, ...], object_power: float, snr_db: float, rng: np.random.Generator) -> np.ndarray:
     """Circular complex Gaussian noise with power object_power / 10^(snr_db / 10) per sample, complex64."""
     sigma = np.sqrt(object_power / 10.0 ** (snr_db / 10.0) / 2.0)
+    return (rng.normal(0.0, sigma, shape) + 1j * rng.normal(0.0, sigma, shape)).astype(np.complex64)
+
+
+def material_amplitudes(samples: SurfaceSamples, reflection: np.ndarray, config: SynthConfig,
+                        viewpoint_m=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """a_k = Fresnel reflection of the sample's part * area; with `scattering="cosine"` also the cosine law."""
+    if config.scattering == "cosine":
+        return surface_amplitudes(samples, reflection, config, viewpoint_m)
+    return reflection[samples.part] * samples.areas_m2
+
+
+def roughen_by_part(samples: SurfaceSamples, roughness_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Scatterer positions displaced along the normal by N(0, roughness of the sample's part)."""
+    sigma = roughness_m[samples.part]
+    return samples.points_m + samples.normals * (rng.normal(size=len(sigma)) * sigma)[:, None]
+
+
+def channel_gains(n_rx: int, n_tx: int, config: SynthConfig, rng: np.random.Generator) -> np.ndarray:
+    """Per-channel calibration residual as a (n_rx, n_tx, 1) complex64 factor g_rx * g_tx: log-normal gain with
+    `channel_amplitude_db` std and a phase with `channel_phase_deg` std, independently per antenna."""
+    def one(n):
+        db = rng.normal(0.0, config.channel_amplitude_db, n)
+        phase = np.deg2rad(rng.normal(0.0, config.channel_phase_deg, n))
+        return 10.0 ** (db / 20.0) * np.exp(1j * phase)
+    return (one(n_rx)[:, None, None] * one(n_tx)[None, :, None]).astype(np.complex64)
+
+
+def wall_frame(tx_m: np.ndarray, rx_m: np.ndarray, freqs_hz: np.ndarray, config: SynthConfig) -> np.ndarray:
+    """The back wall z = wall_distance_m as its image source: s = Gamma lambda / (j L) exp(-j k L), L = |tx - rx'|
+    with rx' the receiver mirrored in the wall (the stationary-phase value of the model's surface integral; a large
+    plate at R gives lambda / (2 R), which is what PLATE_AMPLITUDE_SCALE refers to). Complex64 (n_rx, n_tx, F)."""
+    mirrored = np.asarray(rx_m, dtype=np.float64).copy()
+    mirrored[:, 2] = 2.0 * config.wall_distance_m - mirrored[:, 2]
+    path_m = np.linalg.norm(mirrored[:, None, :] - np.asarray(tx_m, dtype=np.float64)[None], axis=2)
+    wavelength_m = C_M_PER_S / freqs_hz
+    cycles = path_m[..., None] / wavelength_m
+    cycles -= np.rint(cycles)
+    return (config.wall_reflection * wavelength_m / (1j * path_m[..., None])
+            * np.exp(-2j * np.pi * cycles)).astype(np.complex64)
+
+
+def point_amplitude(rcs_m2: float, freq_hz: float) -> float:
+    """Model amplitude of a point scatterer of radar cross-section rcs_m2: lambda sqrt(rcs / (4 pi)) (a flat plate of
+    area A, rcs 4 pi A^2 / lambda^2, gives A: the model's unit)."""
+    return C_M_PER_S / freq_hz * np.sqrt(rcs_m2 / (4.0 * np.pi))
+
+
+def thermal_noise_sigma(config: SynthConfig) -> float:
+    """Per-sample noise std (per real part) in model units from the datasheet link budget.
+
+    Received power of a model sample s is P_r = P_t G_t G_r |s|^2 / (4 pi)^2 (the radar equation with the model's
+    units; see point_amplitude); thermal noise k T0 F B. So sigma_s = sqrt(k T0 F B (4 pi)^2 / (P_t G_t G_r)).
+    """
+    k_t0_w_per_hz = 1.380649e-23 * 290.0
+    noise_w = k_t0_w_per_hz * 10.0 ** (config.noise_figure_db / 10.0) * config.if_bandwidth_hz
+    link = 1e-3 * 10.0 ** (config.tx_power_dbm / 10.0) * 10.0 ** (2.0 * config.element_gain_dbi / 10.0)
+    return float(np.sqrt(noise_w * (4.0 * np.pi) ** 2 / link / 2.0))
+
+
+def thermal_noise(shape: tuple[int, ...], config: SynthConfig, rng: np.random.Generator) -> np.ndarray:
+    """Circular complex Gaussian thermal noise (model units, before amplitude_scale), complex64."""
+    sigma = thermal_noise_sigma(config)
     return (rng.normal(0.0, sigma, shape) + 1j * rng.normal(0.0, sigma, shape)).astype(np.complex64)

@@ -66,3 +66,39 @@ def visible_samples(part_tris_m: list[np.ndarray], spacing_m: float,
     t_hit = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy()
     keep = t_hit >= distance - 2e-4                                   # nothing hit before the sample itself
     return SurfaceSamples(points[keep], normals[keep], areas[keep], part[keep])
+
+
+def back_wall_samples(part_tris_m: list[np.ndarray], transmissive: list[bool], spacing_m: float,
+                      viewpoint_m=(0.0, 0.0, 0.0)) -> SurfaceSamples:
+    """Samples of the far side of partly transmissive parts (a plastic shell's back wall), seen through the near side.
+
+    Triangles of a transmissive part that face away from `viewpoint_m` are sampled with their normals reversed
+    (the inner surface the wave meets); a sample is kept unless an opaque part lies before it on the ray.
+    """
+    import open3d as o3d
+
+    viewpoint_m = np.asarray(viewpoint_m, dtype=np.float64)
+    opaque = [tris for tris, clear in zip(part_tris_m, transmissive) if not clear]
+    chunks = []
+    for index, (tris, clear) in enumerate(zip(part_tris_m, transmissive)):
+        if not clear:
+            continue
+        normals, _ = triangle_normals(tris)
+        away = np.einsum("ij,ij->i", normals, viewpoint_m - tris.mean(axis=1)) < 0
+        fine = bisect_triangles(tris[away], EDGE_PER_SPACING * spacing_m)
+        fine_normals, fine_areas = triangle_normals(fine)
+        chunks.append((fine.mean(axis=1), -fine_normals, fine_areas, np.full(len(fine), index)))
+    if not chunks:
+        return SurfaceSamples(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int64))
+    points, normals, areas, part = (np.concatenate(c) for c in zip(*chunks))
+    if not opaque:
+        return SurfaceSamples(points, normals, areas, part)
+    scene = o3d.t.geometry.RaycastingScene()
+    vertices, triangles = indexed(np.concatenate(opaque))
+    scene.add_triangles(vertices.astype(np.float32), triangles.astype(np.uint32))
+    to_point = points - viewpoint_m
+    distance = np.linalg.norm(to_point, axis=1)
+    rays = np.concatenate([np.broadcast_to(viewpoint_m, points.shape), to_point / distance[:, None]], 1)
+    t_hit = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy()
+    keep = t_hit >= distance - 2e-4
+    return SurfaceSamples(points[keep], normals[keep], areas[keep], part[keep])

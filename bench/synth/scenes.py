@@ -1,7 +1,9 @@
 """The object catalogue: each entry builds its meshes in radar space for a given distance.
 
 Radar space: metres, x right, y up, z from the array to the object. Every object keeps its visible surface within
-about +-6 cm of z = distance and inside the +-0.15 m pixel grid; sizes are 8-16 cm.
+about +-6 cm of z = distance and inside the +-0.15 m pixel grid; sizes are 8-16 cm. Materials (bench.synth.materials)
+span MAROON's objects: metal (plate, tilted plate, the near plate of 08), plastic shells (bottle, bowl), wood (ball,
+step block), cardboard (corrugated sheet) and foam (the far box of 08).
 """
 from __future__ import annotations
 
@@ -18,8 +20,10 @@ class Part:
     """One solid of a scene: closed triangle soup in radar space plus its material."""
 
     tris_m: np.ndarray           # (T, 3, 3) float64, outward winding
-    reflectivity: float          # relative radar amplitude reflectivity (metal = 1)
+    reflectivity: float          # relative radar amplitude reflectivity (metal = 1), ideal generator
     colour_rgb: tuple[int, int, int]
+    material: str = "metal"      # bench.synth.materials.MATERIALS key, used by the realistic effects
+    ground_truth: bool = True    # False for the mount: seen by both sensors, not in the mesh or the object mask
 
 
 @dataclass(frozen=True)
@@ -32,7 +36,17 @@ class Scene:
 
     @property
     def tris_m(self) -> np.ndarray:
-        return np.concatenate([p.tris_m for p in self.parts])
+        """Triangles of the ground truth (the object's parts, without the mount)."""
+        return np.concatenate([p.tris_m for p in self.parts if p.ground_truth])
+
+    def with_mount(self) -> "Scene":
+        """This scene standing on a wooden post (2 x 2 cm) from its lowest point down to y = -0.30 m."""
+        tris = self.tris_m
+        bottom_y, centre = tris[..., 1].min(), tris.reshape(-1, 3).mean(axis=0)
+        post = extrude_strip(np.array([-0.01, 0.01]) + centre[0], [centre[2] - 0.01] * 2, [centre[2] + 0.01] * 2,
+                             bottom_y + 0.30)
+        post = post + [0.0, 0.5 * (bottom_y - 0.30), 0.0]         # extrusion is centred on y = 0
+        return Scene(self.name, self.label, self.parts + (Part(post, 0.2, (120, 90, 60), "wood", False),))
 
 
 def _slab(width_m: float, height_m: float, thickness_m: float, front_z_m: float, centre_x_m: float = 0.0):
@@ -42,32 +56,32 @@ def _slab(width_m: float, height_m: float, thickness_m: float, front_z_m: float,
 
 
 def _plate(d_m: float) -> tuple[Part, ...]:
-    return (Part(_slab(0.12, 0.12, 0.004, d_m), 1.0, (170, 175, 185)),)
+    return (Part(_slab(0.12, 0.12, 0.004, d_m), 1.0, (170, 175, 185), "metal"),)
 
 
 def _tilted_plate(d_m: float) -> tuple[Part, ...]:
     slab = _slab(0.12, 0.12, 0.004, -0.002)                       # centred on the origin
-    return (Part(transform(slab, rotation_matrix([0, 1, 0], 28.0), [0, 0, d_m]), 1.0, (170, 175, 185)),)
+    return (Part(transform(slab, rotation_matrix([0, 1, 0], 28.0), [0, 0, d_m]), 1.0, (170, 175, 185), "metal"),)
 
 
 def _sphere(d_m: float) -> tuple[Part, ...]:
     radius_m = 0.05
     theta = np.linspace(0.0, np.pi, 49)
     ball = revolve(np.stack([radius_m * np.sin(theta), -radius_m * np.cos(theta)], 1))
-    return (Part(ball + [0.0, 0.0, d_m + 0.03], 0.35, (190, 140, 80)),)
+    return (Part(ball + [0.0, 0.0, d_m + 0.03], 0.35, (190, 140, 80), "wood"),)
 
 
 def _bottle(d_m: float) -> tuple[Part, ...]:
     profile = [(0, -0.08), (0.035, -0.08), (0.035, 0.035), (0.03, 0.05), (0.014, 0.065), (0.014, 0.08), (0, 0.08)]
     body = revolve(np.asarray(profile), segments=96)               # axis along z
     upright = transform(body, rotation_matrix([1, 0, 0], -90.0), [0.0, 0.0, d_m + 0.02])  # axis along +y
-    return (Part(upright, 0.5, (90, 160, 90)),)
+    return (Part(upright, 0.5, (90, 160, 90), "plastic"),)
 
 
 def _steps(d_m: float) -> tuple[Part, ...]:
     x = np.array([-0.075, -0.025, -0.025, 0.025, 0.025, 0.075])
     front = d_m + np.array([-0.03, -0.03, 0.0, 0.0, 0.03, 0.03])
-    return (Part(extrude_strip(x, front, np.full(6, d_m + 0.06), 0.10), 0.6, (200, 170, 120)),)
+    return (Part(extrude_strip(x, front, np.full(6, d_m + 0.06), 0.10), 0.6, (200, 170, 120), "wood"),)
 
 
 def _bowl(d_m: float) -> tuple[Part, ...]:
@@ -76,19 +90,19 @@ def _bowl(d_m: float) -> tuple[Part, ...]:
     t = np.linspace(0.0, np.pi / 2, 33)
     outer = np.stack([(inner_m + wall_m) * np.sin(t[::-1]), rim_z + (inner_m + wall_m) * np.cos(t[::-1])], 1)
     inner = np.stack([inner_m * np.sin(t), rim_z + inner_m * np.cos(t)], 1)
-    return (Part(revolve(np.concatenate([outer, inner])), 0.7, (220, 220, 230)),)
+    return (Part(revolve(np.concatenate([outer, inner])), 0.7, (220, 220, 230), "plastic"),)
 
 
 def _corrugated(d_m: float) -> tuple[Part, ...]:
     x = np.linspace(-0.07, 0.07, 57)
     front = d_m + 0.005 * np.sin(2 * np.pi * x / 0.03)
-    return (Part(extrude_strip(x, front, front + 0.003, 0.12), 1.0, (160, 160, 170)),)
+    return (Part(extrude_strip(x, front, front + 0.003, 0.12), 1.0, (160, 160, 170), "cardboard"),)
 
 
 def _two_objects(d_m: float) -> tuple[Part, ...]:
     near = _slab(0.07, 0.09, 0.004, d_m - 0.045, centre_x_m=-0.045)
     far = _slab(0.06, 0.09, 0.04, d_m + 0.045, centre_x_m=0.045)
-    return Part(near, 1.0, (170, 175, 185)), Part(far, 0.5, (200, 170, 120))
+    return Part(near, 1.0, (170, 175, 185), "metal"), Part(far, 0.5, (200, 170, 120), "foam")
 
 
 CATALOGUE: dict[str, tuple[str, Callable[[float], tuple[Part, ...]]]] = {
