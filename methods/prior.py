@@ -2,46 +2,53 @@
 
 RealSense prior: the valid (masked, nonzero) depth pixels are back-projected with the colour intrinsics
 (X = (u - cx) Z / fx, Y = (v - cy) Z / fy, Z in mm; integer u = column, v = row, MAROON_FORMAT.md 3.2),
-triangulated in 2-D, transformed with `realsense2radar` (mm -> m inside the matrix) and rasterised
+triangulated on the image lattice, transformed with `realsense2radar` (mm -> m inside the matrix) and rasterised
 orthographically onto the radar pixel centres with barycentric interpolation, keeping the nearest surface.
 
-Triangulation: instead of a Delaunay triangulation of all valid pixels (about 4 s for 300k points here), the
-image grid is triangulated directly (two triangles per valid 2x2 quad, one for a quad with three valid
-corners; these are Delaunay triangles of the pixel lattice), and the empty radar pixels inside the convex hull
-are then filled from a Delaunay triangulation of the rim of the covered radar region (`raster.fill_convex_hull`).
-Over a hole both give planar triangles between rim samples, so the result is a linear interpolation across
-the hole as in the paper, with rim samples on the radar grid instead of the camera grid.
+Triangulation: the image lattice (MAROON's quad split, metrics.triangulation) instead of a Delaunay triangulation
+of all valid pixels (about 4 s for 300k points here). Depth-jump rule (default, as MAROON's viewer does): a
+triangle is dropped when a checked edge joins camera depths more than `max_jump_mm` (10 mm) apart: a triangle
+across a depth discontinuity (an object's edge in front of the background, or a held object in front of the
+hand) is no surface, and rasterising it would invent depths between the two. `max_jump_mm=None` keeps them.
+Holes: the empty radar pixels inside the convex hull of the covered ones are filled from a Delaunay triangulation
+of the rim of the covered region (`raster.fill_convex_hull`), the same planar interpolation across a hole as the
+paper's Delaunay of all pixels.
+
+`faithful=True` builds the prior as the reference code does (the faithful profile): it samples pixel (v, u) at
+MAROON's shifted position K^-1 (u + 0.5, v + 0.5) instead of the pixel centre (up to one pixel off at the far
+edges; metrics.evaluate.maroon_sample_xy_m), triangulates with its quad rule (the three-valid-quad quirk,
+metrics.triangulation 'maroon') and fills holes by a Delaunay triangulation of all covered pixels' integer
+(column, row) positions re-rasterised (scipy's Qhull, as the reference uses). Pixels it leaves uncovered stay NaN
+(the reference starts them at z = 0).
 
 Photogrammetry prior (paper Table II): the mesh vertices go through `photogrammetry2radar` and are rasterised
-the same way (MAROON_FORMAT.md 4.2, 6.3 step 4), then holes are filled identically.
+the same way (MAROON_FORMAT.md 4.2, 6.3 step 4), then holes are filled identically. GPU mirror:
+methods/warp_backend (the same depth-jump rule per lattice triangle, in camera millimetres).
 """
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import Delaunay, QhullError
 
 from bench.alignment import apply_transform
 from bench.capture import DepthFrame, Mesh, RadarGrid
 from methods.raster import fill_convex_hull, rasterize_nearest_z
+from metrics.triangulation import lattice_triangles
+
+DEFAULT_MAX_JUMP_MM = 10.0   # MAROON's triangulation threshold in optical spaces (MAROON_FORMAT.md 3.2, 5.2)
 
 
-def grid_triangles(valid: np.ndarray, quads: np.ndarray | None = None) -> np.ndarray:
-    """(T, 3) flat pixel indices (row * W + col) of the lattice triangulation of the valid pixels (H, W).
+def grid_triangles(depth_mm: np.ndarray, valid: np.ndarray, quads: np.ndarray | None = None,
+                   max_jump_mm: float | None = DEFAULT_MAX_JUMP_MM, rule: str = "sound") -> np.ndarray:
+    """(T, 3) flat pixel indices (row * W + col) of the lattice triangles of a depth image (H, W) in mm.
 
-    `quads` (H-1, W-1) bool optionally restricts it to the quads whose top-left corner is marked.
+    valid: (H, W) pixels with a depth; quads: optional (H-1, W-1) bool of the quads to consider (top-left corner);
+    max_jump_mm: the depth-jump rule (None = off); rule: three-valid quads, 'sound' or 'maroon'
+    (metrics.triangulation). For a GPU mirror: a quad with four valid corners gives (p00, p10, p01) when
+    |z00 - z10| and |z10 - z01| are <= max_jump_mm and (p11, p01, p10) when |z11 - z01| and |z01 - z10| are; one
+    with three valid corners gives their triangle when all three of its jumps are (rule 'sound').
     """
-    height, width = valid.shape
-    idx = np.arange(height * width).reshape(height, width)
-    p00, p01, p10, p11 = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
-    v00, v01, v10, v11 = valid[:-1, :-1], valid[:-1, 1:], valid[1:, :-1], valid[1:, 1:]
-    if quads is not None:
-        v00, v11 = v00 & quads, v11 & quads
-    cases = (
-        (v00 & v10 & v01, (p00, p10, p01)),           # upper-left half of a quad
-        (v11 & v01 & v10, (p11, p01, p10)),           # lower-right half
-        (v00 & v10 & v11 & ~v01, (p00, p10, p11)),    # three valid corners, top-right missing
-        (v00 & v11 & v01 & ~v10, (p00, p11, p01)),    # three valid corners, bottom-left missing
-    )
-    return np.concatenate([np.column_stack([c[sel] for c in corners]) for sel, corners in cases])
+    return lattice_triangles(depth_mm, max_jump_mm, rule, quads=quads, valid=valid)
 
 
 def quads_around_centres(cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -70,8 +77,13 @@ def backproject_mm(depth: DepthFrame) -> tuple[np.ndarray, np.ndarray]:
     return points_mm, valid
 
 
-def _to_radar_pixels(points_m: np.ndarray, grid: RadarGrid) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous (column, row) of radar-space points on `grid`'s pixel centres, row 0 = +y."""
+def _to_radar_pixels(points_m: np.ndarray, grid: RadarGrid, faithful: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous (column, row) of radar-space points, integers at the sample positions, row 0 = +y: the pixel
+    centres, or with `faithful` MAROON's K^-1 (u + 0.5, v + 0.5) (K of MAROON_FORMAT.md 2.4)."""
+    if faithful:
+        k = grid.intrinsics()
+        return k[0, 0] * points_m[:, 0] + k[0, 3] - 0.5, k[1, 1] * points_m[:, 1] + k[1, 3] - 0.5
     (xmin, ymin, _), (xmax, ymax, _) = grid.bb_min_m, grid.bb_max_m
     nx, ny, _ = grid.size
     cols = (points_m[:, 0] - xmin) * ((nx - 1) / (xmax - xmin))
@@ -79,29 +91,51 @@ def _to_radar_pixels(points_m: np.ndarray, grid: RadarGrid) -> tuple[np.ndarray,
     return cols, rows
 
 
+def delaunay_fill(image: np.ndarray) -> np.ndarray:
+    """The reference's hole filling: Delaunay triangulation of the covered pixels' integer (column, row)
+    positions (row-major order), re-rasterised with their depths; outside the hull NaN."""
+    rows, cols = np.nonzero(np.isfinite(image))
+    try:
+        simplices = Delaunay(np.column_stack([cols, rows]).astype(np.float64)).simplices
+    except (QhullError, ValueError):          # fewer than 3 pixels, or all on one line: nothing to fill
+        return image.copy()
+    filled = rasterize_nearest_z(cols.astype(np.float64), rows.astype(np.float64), image[rows, cols], simplices,
+                                 image.shape)
+    return np.where(np.isfinite(image), image, filled)
+
+
 def rasterize_prior(points_m: np.ndarray, triangles: np.ndarray, grid: RadarGrid,
-                    fill_holes: bool = True) -> np.ndarray:
+                    fill_holes: bool = True, faithful: bool = False) -> np.ndarray:
     """Nearest-surface radar depth (ny, nx) in metres of a radar-space mesh; NaN where it has no prior."""
-    cols, rows = _to_radar_pixels(points_m, grid)
+    cols, rows = _to_radar_pixels(points_m, grid, faithful)
     prior_m = rasterize_nearest_z(cols, rows, points_m[:, 2], triangles, grid.image_shape)
-    return fill_convex_hull(prior_m) if fill_holes else prior_m
+    if not fill_holes:
+        return prior_m
+    return delaunay_fill(prior_m) if faithful else fill_convex_hull(prior_m)
 
 
 def realsense_prior_m(depth: DepthFrame, realsense2radar: np.ndarray, grid: RadarGrid,
-                      fill_holes: bool = True) -> np.ndarray:
-    """Radar-grid depth prior (ny, nx) in metres from a RealSense depth frame; NaN = no prior."""
+                      fill_holes: bool = True, max_jump_mm: float | None = DEFAULT_MAX_JUMP_MM,
+                      faithful: bool = False) -> np.ndarray:
+    """Radar-grid depth prior (ny, nx) in metres from a RealSense depth frame; NaN = no prior.
+
+    max_jump_mm: the depth-jump rule (module doc; None = off); faithful: the reference's construction."""
     points_mm, valid = backproject_mm(depth)
     points_m = apply_transform(realsense2radar, points_mm)
-    cols, rows = _to_radar_pixels(points_m, grid)
+    cols, rows = _to_radar_pixels(points_m, grid, faithful)
     col_img, row_img = np.full(valid.shape, np.nan), np.full(valid.shape, np.nan)
     col_img[valid], row_img[valid] = cols, rows
+    z_mm = np.zeros(valid.shape)
+    z_mm[valid] = points_mm[:, 2]
     index = np.full(valid.shape, -1, dtype=np.int64)
     index[valid] = np.arange(len(points_mm))
-    triangles = index.ravel()[grid_triangles(valid, quads_around_centres(col_img, row_img))]
-    return rasterize_prior(points_m, triangles, grid, fill_holes)
+    lattice = grid_triangles(z_mm, valid, quads_around_centres(col_img, row_img), max_jump_mm,
+                             "maroon" if faithful else "sound")
+    return rasterize_prior(points_m, index.ravel()[lattice], grid, fill_holes, faithful)
 
 
 def mesh_prior_m(mesh: Mesh, photogrammetry2radar: np.ndarray, grid: RadarGrid,
-                 fill_holes: bool = True) -> np.ndarray:
+                 fill_holes: bool = True, faithful: bool = False) -> np.ndarray:
     """Radar-grid depth prior (ny, nx) in metres from the photogrammetry mesh; NaN = no prior."""
-    return rasterize_prior(apply_transform(photogrammetry2radar, mesh.vertices), mesh.triangles, grid, fill_holes)
+    return rasterize_prior(apply_transform(photogrammetry2radar, mesh.vertices), mesh.triangles, grid, fill_holes,
+                           faithful)
