@@ -37,7 +37,7 @@ def parse_frame_spec(spec) -> int | str | slice | tuple[int, ...]:
     if isinstance(spec, bool):
         raise ValueError(f"dataset.frame must be an integer, 'all', a range like 0:10 or a list like [0,3,5], "
                          f"got {spec!r}")
-    if isinstance(spec, int):
+    if isinstance(spec, (int, slice)) or spec == "all":
         return spec
     if isinstance(spec, Sequence) and not isinstance(spec, str):
         values = list(spec)
