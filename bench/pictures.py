@@ -1,0 +1,372 @@
+"""Paper-style pictures of a sweep (MM-2FSK paper Figs. 4-5) and the per-capture panel; PLY export.
+
+Per capture (`<object>_<distance>_<frame>`), from the jobs' `arrays.h5` (depth_m, magnitude, gt_depth_m on the
+capture's metric grid):
+
+* `point_clouds/<stem>.png`: one column per cell; rows: a perspective view, a side view (depth z against y) and a
+  top view (x against depth z). The radar points (valid pixels) are coloured by the residual phasor magnitude in dB
+  relative to the capture's strongest pixel (the quantity the -14 dB filter thresholds, as in the paper), the
+  ground-truth surface (the mesh rasterised on the same grid) is drawn in grey beneath them. The perspective view
+  comes from Open3D's offscreen renderer where it runs (it needs a Vulkan driver, e.g. Debian's
+  `mesa-vulkan-drivers`), else from matplotlib (chosen at run time, `renderer()`); side and top views are
+  orthographic projections drawn by matplotlib, with axes in cm.
+* `point_clouds/<stem>/<cell>.ply` (radar points, magnitude colours) and `<stem>/ground_truth.ply`: metres, radar
+  space (x right, y up, z away from the array).
+* `panels/<stem>.png`: ground truth and (where the dataset can be read) the RealSense prior, then one row per cell:
+  depth, magnitude and the signed depth error (depth - ground truth, diverging colours: red = behind the surface,
+  blue = in front), "no depth" in grey and depth where there is no ground truth in black.
+"""
+from __future__ import annotations
+
+import functools
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after choosing the file-only backend)
+import numpy as np  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+
+SIGNED_ERROR_LIMIT_CM = 2.0      # colour range of the signed error: +-2 cm, beyond saturates (arrows on the bar)
+MAGNITUDE_RANGE_DB = 20.0        # magnitude colours span the strongest pixel down to -20 dB (the filter keeps -14)
+NO_DEPTH_COLOUR = "#9a9a9a"      # grey: distinct from white (zero error) and from both ends of the diverging map
+NO_TRUTH_COLOUR = "#000000"      # black: the method returned depth where the ground truth has no surface
+GT_COLOUR = "#b8b8b8"
+RENDERERS = ("open3d", "matplotlib")
+_PROBE = """
+import numpy as np, open3d as o3d
+r = o3d.visualization.rendering.OffscreenRenderer(32, 32)
+assert np.asarray(r.render_to_image()).shape == (32, 32, 3)
+"""
+
+
+@dataclass(frozen=True)
+class CaptureArrays:
+    """One cell's arrays for one capture on the metric grid: depth and ground truth in metres (NaN = none),
+    magnitude linear; x_m (nx,) and y_m (ny,) are the pixel centres (row 0 = +y)."""
+    depth_m: np.ndarray
+    gt_depth_m: np.ndarray
+    magnitude: np.ndarray
+    x_m: np.ndarray
+    y_m: np.ndarray
+
+    @property
+    def extent_cm(self) -> tuple[float, float, float, float]:
+        """imshow extent (left, right, bottom, top) in cm, pixel edges half a step beyond the centres."""
+        dx, dy = _step(self.x_m), _step(self.y_m)
+        return (100 * (self.x_m[0] - dx / 2), 100 * (self.x_m[-1] + dx / 2),
+                100 * (self.y_m[-1] - dy / 2), 100 * (self.y_m[0] + dy / 2))
+
+
+def _step(values: np.ndarray) -> float:
+    return float(abs(values[1] - values[0])) if len(values) > 1 else 1e-3
+
+
+def read_arrays(h5_path: Path, stem: str) -> CaptureArrays | None:
+    """The capture `stem` of one job's arrays.h5, or None where that job has no such capture."""
+    with h5py.File(h5_path, "r") as h5:
+        if stem not in h5:
+            return None
+        group = h5[stem]
+        (nx, ny, _), lo, hi = group.attrs["grid_size"], group.attrs["bb_min_m"], group.attrs["bb_max_m"]
+        return CaptureArrays(group["depth_m"][()], group["gt_depth_m"][()], group["magnitude"][()],
+                             np.linspace(lo[0], hi[0], int(nx)), np.linspace(hi[1], lo[1], int(ny)))
+
+
+def capture_stems(h5_paths: list[Path]) -> list[str]:
+    """Every capture found in any of the files, sorted."""
+    stems = set()
+    for path in h5_paths:
+        with h5py.File(path, "r") as h5:
+            stems.update(h5)
+    return sorted(stems)
+
+
+def points_m(depth_m: np.ndarray, x_m: np.ndarray, y_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) radar-space points (x, y, depth) of the finite pixels of a depth map, and their (row, col) indices."""
+    rows, cols = np.nonzero(np.isfinite(depth_m))
+    return np.column_stack([x_m[cols], y_m[rows], depth_m[rows, cols]]), np.column_stack([rows, cols])
+
+
+def magnitude_db(magnitude: np.ndarray, reference: float) -> np.ndarray:
+    """20 log10(magnitude / reference), -inf where the magnitude is 0."""
+    with np.errstate(divide="ignore"):
+        return 20.0 * np.log10(np.abs(magnitude) / reference)
+
+
+def _magnitude_colours(cell: CaptureArrays, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Magnitude (dB below the capture's strongest valid pixel) of the points and their RGB colours (0..1)."""
+    values = np.abs(cell.magnitude[index[:, 0], index[:, 1]])
+    reference = values.max() if values.size and values.max() > 0 else 1.0
+    level_db = np.clip(magnitude_db(values, reference), -MAGNITUDE_RANGE_DB, 0.0)
+    return level_db, plt.get_cmap("plasma")((level_db + MAGNITUDE_RANGE_DB) / MAGNITUDE_RANGE_DB)[:, :3]
+
+
+def write_ply(path: Path, points: np.ndarray, colours: np.ndarray | None = None) -> Path:
+    """A point cloud in metres (and RGB colours 0..1) as binary PLY (Open3D)."""
+    import open3d as o3d
+
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
+    if colours is not None:
+        cloud.colors = o3d.utility.Vector3dVector(np.asarray(colours, np.float64))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not o3d.io.write_point_cloud(str(path), cloud):
+        raise OSError(f"{path}: Open3D could not write the point cloud")
+    return path
+
+
+@functools.lru_cache(maxsize=1)
+def _open3d_renders() -> bool:
+    """Whether Open3D's offscreen renderer runs here, probed in a child process (a missing driver can abort it)."""
+    try:
+        probe = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return probe.returncode == 0
+
+
+def renderer() -> str:
+    """'open3d' where its offscreen renderer runs, else 'matplotlib'; `BENCH_RENDERER=open3d|matplotlib` forces
+    one (open3d where it cannot run is an error, not a silent fallback)."""
+    forced = os.environ.get("BENCH_RENDERER", "").strip().lower()
+    if forced and forced not in RENDERERS:
+        raise ValueError(f"BENCH_RENDERER={forced!r}: choose one of {', '.join(RENDERERS)}")
+    if forced == "matplotlib":
+        return forced
+    if _open3d_renders():
+        return "open3d"
+    if forced == "open3d":
+        raise RuntimeError("BENCH_RENDERER=open3d, but Open3D's offscreen renderer does not run here (it needs a "
+                           "Vulkan driver, e.g. apt-get install libvulkan1 mesa-vulkan-drivers)")
+    return "matplotlib"
+
+
+def _perspective_camera(gt_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(centre, eye) in metres: looking at the object from the array side, raised and to the left (as Fig. 5)."""
+    centre = gt_points.mean(axis=0) if len(gt_points) else np.array([0.0, 0.0, 0.3])
+    size = float(np.ptp(gt_points, axis=0).max()) if len(gt_points) else 0.2
+    return centre, centre + np.array([-0.9, 0.6, -1.6]) * max(size, 0.05)
+
+
+@functools.lru_cache(maxsize=1)
+def _offscreen(size_px: int):
+    """One Open3D offscreen renderer per process (creating one costs about a second and prints driver lines)."""
+    from open3d.visualization import rendering
+
+    return rendering.OffscreenRenderer(size_px, size_px)
+
+
+def render_open3d(points: np.ndarray, colours: np.ndarray, gt_points: np.ndarray, size_px: int = 360) -> np.ndarray:
+    """(size_px, size_px, 3) uint8 perspective render of the radar points over the grey ground truth (Open3D)."""
+    import open3d as o3d
+    from open3d.visualization import rendering
+
+    renderer_ = _offscreen(size_px)
+    scene = renderer_.scene
+    scene.clear_geometry()
+    scene.set_background([1.0, 1.0, 1.0, 1.0])
+    grey = np.tile(matplotlib.colors.to_rgb(GT_COLOUR), (len(gt_points), 1))
+    for name, xyz, rgb, point_size in (("truth", gt_points, grey, 1.5), ("radar", points, colours, 3.0)):
+        if len(xyz) == 0:
+            continue
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(xyz, np.float64)))
+        cloud.colors = o3d.utility.Vector3dVector(np.asarray(rgb, np.float64))
+        material = rendering.MaterialRecord()
+        material.shader, material.point_size = "defaultUnlit", point_size
+        scene.add_geometry(name, cloud, material)
+    centre, eye = _perspective_camera(gt_points)
+    renderer_.setup_camera(35.0, centre, eye, [0.0, 1.0, 0.0])
+    return np.asarray(renderer_.render_to_image())
+
+
+def _draw_perspective_matplotlib(ax, points: np.ndarray, colours: np.ndarray, gt_points: np.ndarray) -> None:
+    """The same perspective view with matplotlib's 3D axes (depth into the picture, y up)."""
+    ax.scatter(gt_points[:, 0] * 100, gt_points[:, 2] * 100, gt_points[:, 1] * 100, s=0.2, c=GT_COLOUR,
+               depthshade=False)
+    ax.scatter(points[:, 0] * 100, points[:, 2] * 100, points[:, 1] * 100, s=0.6, c=colours, depthshade=False)
+    ax.set(xlabel="x (cm)", ylabel="z (cm)", zlabel="y (cm)")
+    ax.view_init(elev=20, azim=-60)
+    ax.tick_params(labelsize=6)
+
+
+def _subsample(points: np.ndarray, *arrays: np.ndarray, at_most: int = 20000) -> tuple[np.ndarray, ...]:
+    """Every k-th point so that at most `at_most` are drawn (matplotlib scatter cost), same rows of `arrays`."""
+    step = max(1, -(-len(points) // at_most))
+    return (points[::step], *(a[::step] for a in arrays))
+
+
+def point_cloud_figure(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path, ply_dir: Path | None = None,
+                       use: str | None = None) -> Path:
+    """Figs. 4-5 for one capture: per cell a perspective, side and top view of the radar points (magnitude
+    colours) over the ground truth (grey); writes PLY files into `ply_dir` when given. `use`: the renderer of the
+    perspective view (default `renderer()`)."""
+    use = use or renderer()
+    truth = next(cell for _, cell in cells)
+    gt_points, _ = points_m(truth.gt_depth_m, truth.x_m, truth.y_m)
+    if ply_dir is not None:
+        write_ply(ply_dir / stem / "ground_truth.ply", gt_points, np.tile(matplotlib.colors.to_rgb(GT_COLOUR),
+                                                                          (len(gt_points), 1)))
+    ncols = len(cells)
+    fig = plt.figure(figsize=(2.6 * ncols + 1.2, 8.4), layout="constrained")
+    grid = fig.add_gridspec(3, ncols)
+    gt_shown = _subsample(gt_points)[0]
+    clouds = [points_m(c.depth_m, c.x_m, c.y_m)[0] for _, c in cells]
+    x_cm, y_cm, z_cm = (_window_cm(gt_points, clouds, axis) for axis in range(3))
+    for col, (label, cell) in enumerate(cells):
+        points, index = points_m(cell.depth_m, cell.x_m, cell.y_m)
+        level_db, colours = _magnitude_colours(cell, index)
+        if ply_dir is not None:
+            write_ply(ply_dir / stem / f"{_file_name(label)}.ply", points, colours)
+        shown, shown_colours = _subsample(points, colours)
+        if use == "open3d":
+            ax = fig.add_subplot(grid[0, col])
+            ax.imshow(render_open3d(shown, shown_colours, gt_shown))
+            ax.set_axis_off()
+        else:
+            ax = fig.add_subplot(grid[0, col], projection="3d")
+            _draw_perspective_matplotlib(ax, shown, shown_colours, gt_shown)
+        ax.set_title(f"{label}\n{len(points)} points", fontsize=8)
+        side, top = fig.add_subplot(grid[1, col]), fig.add_subplot(grid[2, col])
+        side.scatter(gt_shown[:, 2] * 100, gt_shown[:, 1] * 100, s=0.3, c=GT_COLOUR, rasterized=True)
+        side.scatter(shown[:, 2] * 100, shown[:, 1] * 100, s=0.5, c=shown_colours, rasterized=True)
+        side.set(xlabel="z, depth (cm)", ylabel="y (cm)", xlim=z_cm, ylim=y_cm, title="side view (array left)")
+        top.scatter(gt_shown[:, 0] * 100, gt_shown[:, 2] * 100, s=0.3, c=GT_COLOUR, rasterized=True)
+        top.scatter(shown[:, 0] * 100, shown[:, 2] * 100, s=0.5, c=shown_colours, rasterized=True)
+        top.set(xlabel="x (cm)", ylabel="z, depth (cm)", xlim=x_cm, ylim=z_cm, title="top view (array below)")
+        for ax in (side, top):
+            ax.title.set_fontsize(8)
+            ax.tick_params(labelsize=7)
+            ax.xaxis.label.set_fontsize(7)
+            ax.yaxis.label.set_fontsize(7)
+    bar = plt.cm.ScalarMappable(plt.Normalize(-MAGNITUDE_RANGE_DB, 0), cmap="plasma")
+    fig.colorbar(bar, ax=fig.axes, shrink=0.6, label="residual phasor magnitude (dB re strongest pixel)")
+    fig.legend(handles=[Patch(color=GT_COLOUR, label="ground truth")], loc="outside lower left", fontsize=8)
+    renderer_note = "Open3D offscreen" if use == "open3d" else "matplotlib"
+    fig.suptitle(f"{stem}: radar point clouds over the ground truth (grey), coloured by magnitude; "
+                 f"perspective view by {renderer_note}", fontsize=9)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _window_cm(gt_points: np.ndarray, clouds: list[np.ndarray], axis: int, margin_cm: float = 2.0
+               ) -> tuple[float, float]:
+    """Range (cm) of one coordinate over the ground truth and every radar point (wraps stay visible), plus a margin;
+    the same for every column so that the cells compare at a glance."""
+    values = [c[:, axis] for c in (gt_points, *clouds) if len(c)]
+    if not values:
+        return (20.0, 40.0) if axis == 2 else (-15.0, 15.0)
+    values_cm = np.concatenate(values) * 100
+    return float(values_cm.min() - margin_cm), float(values_cm.max() + margin_cm)
+
+
+def _file_name(label: str) -> str:
+    """A cell label as a file name: 'MM-2FSK Δ10.0' -> 'MM-2FSK_d10.0'."""
+    return "".join(ch if ch.isalnum() or ch in "-._" else "_" for ch in label.replace("Δ", "d")).strip("_")
+
+
+def signed_error_cm(cell: CaptureArrays) -> np.ndarray:
+    """depth - ground truth in cm (positive: the radar put the surface behind the truth); NaN where either is."""
+    return (cell.depth_m - cell.gt_depth_m) * 100.0
+
+
+def _categories(cell: CaptureArrays) -> np.ndarray:
+    """Masked overlay: NaN where an error is drawn, 0 = no depth, 1 = depth without ground truth."""
+    overlay = np.full(cell.depth_m.shape, np.nan)
+    overlay[~np.isfinite(cell.depth_m)] = 0
+    overlay[np.isfinite(cell.depth_m) & ~np.isfinite(cell.gt_depth_m)] = 1
+    return overlay
+
+
+def _crop_cm(cells: list[CaptureArrays], margin_cm: float = 1.0) -> tuple[tuple, tuple]:
+    """x and y ranges (cm) around every pixel with a depth or a ground truth in any cell, plus a margin."""
+    x_cm, y_cm = [], []
+    for cell in cells:
+        rows, cols = np.nonzero(np.isfinite(cell.depth_m) | np.isfinite(cell.gt_depth_m))
+        x_cm.append(cell.x_m[cols] * 100)
+        y_cm.append(cell.y_m[rows] * 100)
+    x_cm, y_cm = np.concatenate(x_cm), np.concatenate(y_cm)
+    if x_cm.size == 0:
+        left, right, bottom, top = cells[0].extent_cm
+        return (left, right), (bottom, top)
+    return (x_cm.min() - margin_cm, x_cm.max() + margin_cm), (y_cm.min() - margin_cm, y_cm.max() + margin_cm)
+
+
+def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
+                  prior_m: np.ndarray | None = None) -> Path:
+    """Per capture: ground truth and prior on top, then per cell depth, magnitude (dB) and signed error (cm)."""
+    arrays = [cell for _, cell in cells]
+    truth = arrays[0]
+    xlim, ylim = _crop_cm(arrays)
+    depth_cm = np.concatenate([a.depth_m[np.isfinite(a.depth_m)] for a in arrays] +
+                              [truth.gt_depth_m[np.isfinite(truth.gt_depth_m)]]) * 100
+    depth_range = (np.percentile(depth_cm, 1), np.percentile(depth_cm, 99)) if depth_cm.size else (20.0, 40.0)
+    depth_map = plt.get_cmap("viridis").with_extremes(bad=NO_DEPTH_COLOUR)
+    error_map = plt.get_cmap("RdBu_r").with_extremes(bad=NO_DEPTH_COLOUR)
+    overlay_map = ListedColormap([NO_DEPTH_COLOUR, NO_TRUTH_COLOUR])
+    fig, axes = plt.subplots(len(cells) + 1, 3, figsize=(10.5, 3.0 * (len(cells) + 1) + 0.6), squeeze=False,
+                             layout="constrained")
+
+    def show(ax, image, cmap, vmin, vmax, title, bar_label, extend="neither"):
+        drawn = ax.imshow(image, extent=truth.extent_cm, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
+        ax.set(xlim=xlim, ylim=ylim, xlabel="x (cm)", ylabel="y (cm)")
+        ax.set_title(title, fontsize=8)
+        ax.tick_params(labelsize=7)
+        fig.colorbar(drawn, ax=ax, shrink=0.85, extend=extend).set_label(bar_label, fontsize=7)
+        return drawn
+
+    show(axes[0, 0], truth.gt_depth_m * 100, depth_map, *depth_range, "ground truth depth", "depth z (cm)")
+    if prior_m is not None:
+        show(axes[0, 1], prior_m * 100, depth_map, *depth_range, "RealSense prior (MM-2FSK)", "depth z (cm)")
+    else:
+        axes[0, 1].set_axis_off()
+        axes[0, 1].text(0.5, 0.5, "prior not available\n(dataset not readable here)", ha="center",
+                        transform=axes[0, 1].transAxes, fontsize=8)
+    axes[0, 2].set_axis_off()
+    axes[0, 2].legend(handles=[Patch(color=NO_DEPTH_COLOUR, label="no depth (filtered or not returned)"),
+                               Patch(color=NO_TRUTH_COLOUR, label="depth where the ground truth has no surface"),
+                               Patch(color=plt.get_cmap("RdBu_r")(1.0), label="error > 0: behind the surface"),
+                               Patch(color=plt.get_cmap("RdBu_r")(0.0), label="error < 0: in front of it")],
+                      loc="center", fontsize=8, frameon=False)
+    for row, (label, cell) in enumerate(cells, start=1):
+        show(axes[row, 0], cell.depth_m * 100, depth_map, *depth_range, f"{label}: depth", "depth z (cm)")
+        valid = np.isfinite(cell.depth_m)
+        reference = np.abs(cell.magnitude[valid]).max() if valid.any() else 1.0
+        level = np.where(valid, magnitude_db(cell.magnitude, reference or 1.0), np.nan)
+        show(axes[row, 1], level, plt.get_cmap("plasma").with_extremes(bad=NO_DEPTH_COLOUR), -MAGNITUDE_RANGE_DB,
+             0, f"{label}: magnitude", "dB re strongest pixel", extend="min")
+        error = signed_error_cm(cell)
+        show(axes[row, 2], error, error_map, -SIGNED_ERROR_LIMIT_CM, SIGNED_ERROR_LIMIT_CM,
+             f"{label}: depth - ground truth", f"signed error (cm), saturates at ±{SIGNED_ERROR_LIMIT_CM:g}",
+             extend="both")
+        axes[row, 2].imshow(_categories(cell), extent=truth.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
+                            interpolation="nearest")
+        axes[row, 2].set(xlim=xlim, ylim=ylim)
+    fig.suptitle(f"{stem}: depth, magnitude and signed error per method (x, y in cm, radar space)", fontsize=9)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str, np.ndarray] | None = None,
+                   ply: bool = True) -> dict[str, dict[str, Path]]:
+    """Point-cloud figures (+ PLY) and panels of every capture of the runs ((label, arrays.h5) pairs) under
+    `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}."""
+    use = renderer()
+    written = {}
+    for stem in capture_stems([path for _, path in runs]):
+        cells = [(label, arrays) for label, path in runs if (arrays := read_arrays(path, stem)) is not None]
+        written[stem] = {
+            "point_clouds": point_cloud_figure(cells, stem, out_dir / "point_clouds" / f"{stem}.png",
+                                               out_dir / "point_clouds" if ply else None, use=use),
+            "panel": capture_panel(cells, stem, out_dir / "panels" / f"{stem}.png", (priors or {}).get(stem))}
+    return written
