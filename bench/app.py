@@ -57,7 +57,7 @@ def synthetic_asked(task_overrides: list[str]) -> bool:
     return "dataset=synthetic" in names or not any(name.startswith("dataset.root=") for name in names)
 
 
-def _ensure_synthetic(dataset: DictConfig, root: Path) -> None:
+def _ensure_synthetic(dataset: DictConfig, root: Path, synth: DictConfig) -> None:
     """Generate (or reuse from cache) the synthetic captures the dataset config asks for (bench.synth).
 
     Only into a missing or empty folder or one the generator made (it holds its manifest), under the root's lock
@@ -66,12 +66,18 @@ def _ensure_synthetic(dataset: DictConfig, root: Path) -> None:
     """
     if dataset.generate is None:
         return
-    from bench.synth import SynthConfig, generate_catalogue
+    from bench.synth import generate_catalogue
+    from bench.synth.config import preset
     from bench.synth.ownership import ForeignRootError
 
+    try:   # the preset and its overrides (configs/synth/): an unknown name or field is a user error
+        config = preset(synth.preset, **OmegaConf.to_container(synth.overrides))
+        config.validate()
+    except (TypeError, ValueError) as err:
+        raise cli.UserError("synth", str(err)) from None
     objects = None if dataset.generate.objects is None else list(dataset.generate.objects)
     try:
-        generate_catalogue(root, distances=list(dataset.generate.distances), objects=objects, config=SynthConfig(),
+        generate_catalogue(root, distances=list(dataset.generate.distances), objects=objects, config=config,
                            log=lambda r: log.info("synthetic %s: %s (%.1f s)", r.path, r.status, r.seconds),
                            on_wait=lambda: log.info("waiting for another process generating captures in %s", root))
     except ForeignRootError:
@@ -197,7 +203,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
 
     root = Path(to_absolute_path(str(cfg.dataset.root)))
     if generate:
-        _ensure_synthetic(cfg.dataset, root)
+        _ensure_synthetic(cfg.dataset, root, cfg.synth)
     if not root.exists():
         raise DatasetError(root, "dataset root does not exist")
     store = None if cfg.store.dir is None else Store(to_absolute_path(str(cfg.store.dir)))
