@@ -1,5 +1,5 @@
-"""Command line: `python -m bench.synth --out DIR [--distances 30 40 50] [--objects ...] [--frames N]
-[--motion static|lateral|approach] [--motion-speed M_S]
+"""Command line: `python -m bench.synth --out DIR [--preset realistic|ideal] [--distances 30 40 50] [--objects ...]
+[--frames N] [--motion static|lateral|approach] [--motion-speed M_S]
 [--snr-db X] [--seed S] [--no-clutter] [--force]`. Prints one line per capture; bad arguments or an output folder
 that cannot be written give a one-line error and exit code 2 (bench.cli)."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import dataclasses
 import time
 
 from bench import cli
-from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig
+from bench.synth.config import DEFAULT_PRESET, DISTANCE_RANGE_CM, PRESETS, SynthConfig, preset
 from bench.synth.motion import MOTIONS
 from bench.synth.motion import validate as validate_motion
 from bench.synth.generate import DEFAULT_DISTANCES_CM, CaptureResult, generate_catalogue
@@ -19,13 +19,16 @@ from bench.synth.scenes import CATALOGUE
 def _parser() -> argparse.ArgumentParser:
     p = cli.ArgumentParser(prog="python -m bench.synth", description="Generate synthetic MAROON-format captures.")
     p.add_argument("--out", required=True, help="dataset root directory")
+    p.add_argument("--preset", choices=list(PRESETS), default=DEFAULT_PRESET,
+                   help="generator settings: realistic (the effects of real data) or ideal (exact physics)")
     p.add_argument("--distances", type=int, nargs="+", default=list(DEFAULT_DISTANCES_CM), help="centimetres")
     p.add_argument("--objects", nargs="+", default=None, help=f"subset of: {' '.join(CATALOGUE)}")
     p.add_argument("--frames", type=cli.positive_int, default=SynthConfig.frames)
     p.add_argument("--motion", choices=list(MOTIONS), default=SynthConfig.motion,
                    help="trajectory of the object over the frames (bench/synth/motion.py)")
     p.add_argument("--motion-speed", type=float, default=SynthConfig.motion_speed_m_s, help="m/s")
-    p.add_argument("--snr-db", type=float, default=SynthConfig.snr_db)
+    p.add_argument("--snr-db", type=float, default=None,
+                   help=f"per-sample SNR where the preset's noise model is 'snr' (ideal: {SynthConfig.snr_db})")
     p.add_argument("--seed", type=int, default=SynthConfig.seed)
     p.add_argument("--no-clutter", action="store_true", help="raw frames without empty-room clutter")
     p.add_argument("--force", action="store_true", help="regenerate even when the cache is up to date")
@@ -42,9 +45,10 @@ def main(argv: list[str] | None = None) -> int:
     bad = [d for d in args.distances if not lo <= d <= hi]
     if bad:
         parser.error(f"distances must be in {lo}..{hi} cm, got {', '.join(map(str, bad))}")
-    config = dataclasses.replace(SynthConfig(), frames=args.frames, motion=args.motion,
-                                 motion_speed_m_s=args.motion_speed, snr_db=args.snr_db, seed=args.seed,
-                                 clutter=not args.no_clutter)
+    snr = {} if args.snr_db is None else {"snr_db": args.snr_db}
+    config = dataclasses.replace(preset(args.preset), frames=args.frames, motion=args.motion,
+                                 motion_speed_m_s=args.motion_speed, seed=args.seed, clutter=not args.no_clutter,
+                                 **snr)
     try:
         config.validate()
         validate_motion(config)

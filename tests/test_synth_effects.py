@@ -1,0 +1,235 @@
+"""Each effect of the realistic synthetic preset does what it claims (bench.synth.config.EFFECTS), on small inputs:
+no capture is generated here (scenes are rendered or simulated directly; a few seconds in all)."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from bench.synth.config import C_M_PER_S, EFFECTS, PRESETS, SynthConfig, preset
+from bench.synth.materials import MATERIALS
+from bench.synth.meshes import rotation_matrix
+from bench.synth.radar_model import (channel_gains, leg_gains, point_amplitude, simulate_frame, thermal_noise_sigma,
+                                     wall_frame)
+
+NO_NOISE = dict(disparity_sigma_px=0.0, dropout_fraction=0.0)   # holes at edges and steep slopes stay
+
+
+def test_presets_ideal_is_the_default_and_every_effect_switch_changes_the_realistic_preset():
+    assert PRESETS["ideal"] == SynthConfig()
+    realistic = preset("realistic")
+    realistic.validate()
+    for name, off in EFFECTS.items():
+        assert dataclasses.replace(realistic, **off) != realistic, f"{name}: switching it off changes nothing"
+        assert all(getattr(SynthConfig(), k) == v for k, v in off.items()), f"{name}: 'off' is not the ideal value"
+    with pytest.raises(ValueError, match="unknown synthetic preset"):
+        preset("nope")
+
+
+def test_fresnel_reflection_and_transmission_of_the_materials():
+    assert MATERIALS["metal"].reflection == 1.0 and MATERIALS["metal"].transmission == 0.0
+    n = np.sqrt(2.35)
+    assert MATERIALS["plastic"].reflection == pytest.approx((n - 1) / (n + 1))          # 0.21
+    assert 0.9 < MATERIALS["plastic"].transmission < 1.0
+    assert MATERIALS["foam"].reflection < 0.01                                             # nearly transparent
+    assert MATERIALS["wood"].transmission == 0.0                                           # solid wood: no wall
+
+
+def _render(object_name: str, **overrides):
+    pytest.importorskip("open3d")
+    from bench.synth import depth_camera
+    from bench.synth.scenes import build_scene
+
+    config = dataclasses.replace(SynthConfig(), **{**NO_NOISE, **overrides})
+    scene = build_scene(object_name, 0.30)
+    pose = depth_camera.perturbed_pose(depth_camera.nominal_pose(config), config, np.random.default_rng(3))
+    return depth_camera.render(scene, pose, config, np.random.default_rng(4)), config
+
+
+def test_translucent_plastic_is_seen_behind_its_surface():
+    plain, _ = _render("04_bottle")
+    translucent, _ = _render("04_bottle", camera_materials=True)
+    on_object = (plain.mask == 255) & (plain.depth_mm > 0) & (translucent.depth_mm > 0)
+    shift_mm = translucent.depth_mm[on_object].astype(float) - plain.depth_mm[on_object]
+    assert np.median(shift_mm) == pytest.approx(MATERIALS["plastic"].subsurface_bias_m * 1e3, abs=1.0)
+
+
+def test_specular_metal_loses_camera_pixels():
+    plain, _ = _render("01_plate")
+    metal, _ = _render("01_plate", camera_materials=True)
+    on_object = plain.mask == 255
+    lost = np.mean(metal.depth_mm[on_object] == 0) - np.mean(plain.depth_mm[on_object] == 0)
+    assert lost == pytest.approx(MATERIALS["metal"].dropout_fraction, abs=0.02)
+
+
+def test_calibration_residual_shifts_the_prior_by_the_set_amount():
+    """A pure translation of the camera by 3 mm moves the plate's back-projected points (with the nominal pose, as
+    the reader does) by 3 mm; only the component along the plate's normal (z) changes its depth."""
+    pytest.importorskip("open3d")
+    from bench.synth import depth_camera
+    from bench.synth.scenes import build_scene
+
+    config = dataclasses.replace(SynthConfig(), extrinsic_error_mm=3.0, extrinsic_error_deg=0.0)
+    nominal = depth_camera.nominal_pose(config)
+    pose = depth_camera.perturbed_pose(nominal, config, np.random.default_rng(3))
+    offset_m = pose.position_m - nominal.position_m
+    assert np.linalg.norm(offset_m) == pytest.approx(3e-3, rel=1e-9)
+    rotated = depth_camera.perturbed_pose(nominal, dataclasses.replace(config, extrinsic_error_deg=0.5),
+                                          np.random.default_rng(3))
+    angle = np.degrees(np.arccos((np.trace(rotated.rotation.T @ nominal.rotation) - 1) / 2))
+    assert angle == pytest.approx(0.5, rel=1e-6)
+
+    def plate_z_m(camera_pose):
+        frame = depth_camera.render(build_scene("01_plate", 0.30), camera_pose,
+                                    dataclasses.replace(config, **NO_NOISE), np.random.default_rng(0))
+        v, u = np.nonzero((frame.mask == 255) & (frame.depth_mm > 0))
+        z_mm = frame.depth_mm[v, u].astype(float)
+        cam = np.stack([(u - config.principal_point_px[0]) * z_mm / config.focal_px,
+                        (v - config.principal_point_px[1]) * z_mm / config.focal_px, z_mm], 1)
+        return np.median((cam * 1e-3) @ nominal.rotation.T + nominal.position_m, axis=0)[2]
+
+    # depths are stored in whole mm: compare medians over the plate (sub-mm through the plane's tilt)
+    assert plate_z_m(pose) - plate_z_m(nominal) == pytest.approx(-offset_m[2], abs=0.3e-3)
+
+
+def test_edge_pixels_fatten_the_foreground_and_fly_between_the_surfaces():
+    holes, _ = _render("01_plate")
+    edges, config = _render("01_plate", edge_fattening_px=3, flying_pixel_fraction=0.5)
+    valid_ideal, valid_edges = holes.depth_mm > 0, edges.depth_mm > 0
+    assert valid_edges.sum() > valid_ideal.sum()                              # fewer holes at the plate's rim
+    between = valid_edges & (edges.depth_mm > 340) & (edges.depth_mm < 950)   # neither the plate nor the wall
+    assert between.sum() > 100
+    assert between[holes.mask == 255].sum() < between.sum()                   # mostly off the object: flying
+
+
+def test_slant_bias_grows_with_incidence():
+    facing, _ = _render("01_plate")
+    facing_b, config = _render("01_plate", slant_bias_px=0.5)
+    tilted, _ = _render("02_tilted_plate")
+    tilted_b, _ = _render("02_tilted_plate", slant_bias_px=0.5)
+
+    def bias_mm(a, b):
+        both = (a.mask == 255) & (a.depth_mm > 0) & (b.depth_mm > 0)
+        return np.mean(b.depth_mm[both].astype(float) - a.depth_mm[both])
+
+    assert bias_mm(tilted, tilted_b) > bias_mm(facing, facing_b) + 0.1
+    assert bias_mm(tilted, tilted_b) > 0
+
+
+def _small_plate(normal_tilt_deg: float, centre_m=(0.0, 0.0, 0.30), half_m=0.02, spacing_m=0.8e-3):
+    """Samples of a square plate facing -z, then tilted about y: points, normals, areas."""
+    g = np.arange(-half_m, half_m + 1e-12, spacing_m)
+    x, y = np.meshgrid(g, g)
+    points = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    rotation = rotation_matrix([0, 1, 0], normal_tilt_deg)
+    normals = np.tile([0.0, 0.0, -1.0], (len(points), 1)) @ rotation.T
+    return points @ rotation.T + centre_m, normals, np.full(len(points), spacing_m ** 2)
+
+
+def test_specular_plate_tilted_away_returns_less_than_one_facing_the_array():
+    from bench.antennas import load_antenna_array
+
+    antennas = load_antenna_array()
+    tx, rx = antennas.tx_m[::6], antennas.rx_m[::6]
+    freqs = np.linspace(76e9, 78e9, 3)
+    lobe = np.full(1, np.deg2rad(MATERIALS["metal"].lobe_deg))
+
+    def energy(tilt_deg, specular):
+        points, normals, areas = _small_plate(tilt_deg)
+        frame = simulate_frame(points, areas, tx, rx, freqs, normals if specular else None,
+                               np.repeat(lobe, len(points)) if specular else None)
+        return float(np.sum(np.abs(frame) ** 2))
+
+    specular_ratio = energy(35.0, True) / energy(0.0, True)
+    cosine_ratio = energy(35.0, False) / energy(0.0, False)
+    assert specular_ratio < 0.5 * cosine_ratio
+    assert specular_ratio < 0.1
+
+
+def test_leg_gains_element_pattern_and_lobe_values():
+    point = np.array([[0.0, 0.0, 0.30]])
+    antennas = np.array([[0.0, 0.0, 0.0], [0.30, 0.0, 0.0]])
+    gain = leg_gains(point, antennas, element_exponent=1.0)
+    assert gain[0] == pytest.approx([1.0, np.cos(np.pi / 4)])
+    lobe = leg_gains(point, antennas, normals=np.array([[0.0, 0.0, -1.0]]), lobe_rad=np.array([np.pi / 8]))
+    assert lobe[0] == pytest.approx([1.0, np.exp(-0.5 * 2.0 ** 2)])           # 45 deg off the normal = 2 lobes
+
+
+def test_back_walls_of_transmissive_parts_are_sampled_behind_the_front():
+    pytest.importorskip("open3d")
+    from bench.synth.sampling import back_wall_samples, visible_samples
+    from bench.synth.scenes import build_scene
+
+    parts = build_scene("04_bottle", 0.30).parts
+    tris = [p.tris_m for p in parts]
+    front = visible_samples(tris, 2e-3)
+    back = back_wall_samples(tris, [True], 2e-3)
+    assert len(back.areas_m2) > 0.5 * len(front.areas_m2)
+    assert np.median(back.points_m[:, 2]) > np.median(front.points_m[:, 2]) + 0.03      # the far half of the body
+    assert np.all(back.normals[:, 2] < 0.2)                                              # reversed: towards the array
+    assert len(back_wall_samples(tris, [False], 2e-3).areas_m2) == 0                     # opaque: nothing
+
+
+def test_channel_residual_has_the_set_spread():
+    config = dataclasses.replace(SynthConfig(), channel_amplitude_db=0.5, channel_phase_deg=5.0)
+    gains = channel_gains(4000, 1, config, np.random.default_rng(0))[:, 0, 0]
+    # g_rx * g_tx: the transmitter's factor is one common draw; remove it with the median
+    gains = gains / np.exp(1j * np.median(np.angle(gains))) / np.median(np.abs(gains))
+    assert np.std(20 * np.log10(np.abs(gains))) == pytest.approx(0.5, rel=0.1)
+    assert np.degrees(np.std(np.angle(gains))) == pytest.approx(5.0, rel=0.1)
+
+
+def test_wall_image_source_matches_the_sampled_plane_and_its_range():
+    """The wall as an image source equals the model's sum over a large sampled plane (stationary phase) within the
+    edge-diffraction ripple, and |s| = Gamma lambda / (2 R) for a monostatic pair."""
+    config = dataclasses.replace(SynthConfig(), wall_reflection=1.0, wall_distance_m=1.0)
+    freq = np.array([77e9])
+    origin = np.zeros((1, 3))
+    s = wall_frame(origin, origin, freq, config)[0, 0, 0]
+    wavelength = C_M_PER_S / freq[0]
+    assert abs(s) == pytest.approx(wavelength / 2.0, rel=1e-5)
+    distance_m, half_m, step_m = 0.5, 0.25, 0.5e-3
+    g = np.arange(-half_m, half_m, step_m) + step_m / 2
+    x, y = np.meshgrid(g, g)
+    r = np.sqrt(x ** 2 + y ** 2 + distance_m ** 2)
+    sampled = np.sum(step_m ** 2 * np.exp(-2j * np.pi * freq[0] * 2 * r / C_M_PER_S) / r ** 2)
+    near = wall_frame(origin, origin, freq, dataclasses.replace(config, wall_distance_m=distance_m))[0, 0, 0]
+    assert abs(sampled) == pytest.approx(abs(near), rel=0.25)
+    assert abs(np.angle(sampled / near)) < 0.3
+
+
+def test_point_amplitude_units_and_datasheet_noise_level():
+    area_m2, wavelength = 1e-4, C_M_PER_S / 77e9
+    assert point_amplitude(4 * np.pi * area_m2 ** 2 / wavelength ** 2, 77e9) == pytest.approx(area_m2)
+    # k T F B (4 pi)^2 / (P_t G_t G_r), per real part: 0 dBm, 6 dBi elements, NF 12 dB, 1 MHz
+    expected = np.sqrt(1.380649e-23 * 290 * 10 ** 1.2 * 1e6 * (4 * np.pi) ** 2 / (1e-3 * 10 ** 1.2) / 2)
+    assert thermal_noise_sigma(preset("realistic")) == pytest.approx(expected)
+
+
+def test_mount_is_seen_but_is_not_ground_truth():
+    pytest.importorskip("open3d")
+    from bench.synth import depth_camera
+    from bench.synth.scenes import build_scene
+
+    scene = build_scene("03_sphere", 0.30)
+    mounted = scene.with_mount()
+    assert len(mounted.parts) == len(scene.parts) + 1 and not mounted.parts[-1].ground_truth
+    assert np.array_equal(mounted.tris_m, scene.tris_m)
+    config = dataclasses.replace(SynthConfig(), **NO_NOISE)
+    pose = depth_camera.nominal_pose(config)
+    plain = depth_camera.render(scene, pose, config, np.random.default_rng(0))
+    with_post = depth_camera.render(mounted, pose, config, np.random.default_rng(0))
+    assert np.array_equal(plain.mask, with_post.mask)                        # the post is not in the object mask
+    assert np.sum((with_post.depth_mm > 0) & (with_post.depth_mm < 400)) > np.sum(
+        (plain.depth_mm > 0) & (plain.depth_mm < 400))                       # but the camera sees it
+
+
+def test_ground_truth_registration_residual_has_the_set_size():
+    from bench.synth.generate import _registration_residual
+
+    config = dataclasses.replace(SynthConfig(), gt_registration_mm=1.0, gt_registration_deg=0.2)
+    residual = _registration_residual(config, np.random.default_rng(0))
+    assert np.linalg.norm(residual[:3, 3]) == pytest.approx(1e-3)
+    assert np.degrees(np.arccos((np.trace(residual[:3, :3]) - 1) / 2)) == pytest.approx(0.2, rel=1e-6)
+    assert np.array_equal(_registration_residual(SynthConfig(), np.random.default_rng(0)), np.eye(4))
