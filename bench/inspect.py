@@ -1,4 +1,5 @@
-"""`python -m bench.inspect DIR`: what each capture holds and what is missing or wrong. Exit 1 on any problem."""
+"""`python -m bench.inspect DIR`: what each capture holds and what is missing or wrong, and which of MAROON's
+reference-viewer expectations it meets (bench.reference_check; information only). Exit 1 on any problem."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,6 +11,7 @@ from bench.alignment import apply_transform
 from bench.capture import Capture
 from bench.cli import ArgumentParser, run_guarded
 from bench.errors import DatasetError
+from bench.reference_check import reference_expectations
 
 
 def _radar_lines(capture: Capture) -> list[str]:
@@ -83,7 +85,16 @@ def inspect_capture(capture_dir: Path) -> tuple[list[str], list[str]]:
                             f"{len(capture.radar_frames)} frame files found")
     except DatasetError as err:
         problems.append(str(err))
-    return found, list(dict.fromkeys(problems))
+    return found + _reference_lines(capture_dir), list(dict.fromkeys(problems))
+
+
+def _reference_lines(capture_dir: Path) -> list[str]:
+    """Which of MAROON's reference-viewer expectations the capture meets (information, not problems)."""
+    expectations = reference_expectations(capture_dir)
+    unmet = [e for e in expectations if not e.met]
+    lines = [f"reference  {len(expectations) - len(unmet)}/{len(expectations)} of the MAROON viewer's expectations "
+             f"met{'' if unmet else ' (it would read this capture)'}"]
+    return lines + [f"  not met  {e.what}: {e.why}" for e in unmet]
 
 
 def main() -> int:

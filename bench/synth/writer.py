@@ -8,6 +8,7 @@ import numpy as np
 from PIL import Image
 
 from bench.capture import RadarGrid
+from bench.synth import photogrammetry
 from bench.synth.config import F_HIGH_GHZ, F_LOW_GHZ
 from bench.synth.meshes import indexed
 
@@ -107,3 +108,5 @@ def write_mesh_obj(path: Path, tris_m: np.ndarray) -> None:
         fh.write("# synthetic ground truth, metres, photogrammetry frame\n")
         np.savetxt(fh, vertices, fmt="v %.7f %.7f %.7f")
         np.savetxt(fh, triangles + 1, fmt="f %d %d %d")
+    if path.name == photogrammetry.GT_MESH_NAME:        # the rest of what MAROON's loader opens beside it
+        photogrammetry.write_loader_files(path.parent, vertices, triangles)
