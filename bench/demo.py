@@ -1,4 +1,4 @@
-"""`python -m bench.demo [--root DIR] [--out DIR] [--store DIR] [--update-results [--results DIR]]`: the main job.
+"""`python -m bench.demo [--root DIR] [--out DIR] [--store DIR] [--synth realistic|ideal] [--update-results [--results DIR]]`:
 
 1. Generates the embedded synthetic dataset (`--root`, default data/synthetic) in this process, one line per
    capture, before any sweep starts (cached: a re-run finds every capture up to date in milliseconds).
@@ -40,23 +40,25 @@ class SweepFailed(Exception):
     """A sweep exited non-zero; the message is the reason it printed (its last `error:` line)."""
 
 
-def generate_dataset(root: Path) -> None:
-    """The synthetic captures configs/dataset/synthetic.yaml asks for, generated here before any sweep starts."""
-    from bench.synth import CATALOGUE, SynthConfig, generate_catalogue
+def generate_dataset(root: Path, synth: str = "realistic") -> None:
+    """The synthetic captures configs/dataset/synthetic.yaml asks for, generated here with the preset `synth`
+    (configs/synth/) before any sweep starts."""
+    from bench.synth import CATALOGUE, generate_catalogue
+    from bench.synth.config import preset
     from bench.synth.ownership import ForeignRootError
 
     settings = OmegaConf.load(CONFIG_DIR / "dataset" / "synthetic.yaml").generate
     objects = list(CATALOGUE) if settings.objects is None else list(settings.objects)
     distances = list(settings.distances)
     total, done = len(objects) * len(distances), itertools.count(1)
-    print(f"synthetic dataset {root}: {total} captures", flush=True)
+    print(f"synthetic dataset {root}: {total} captures, preset {synth}", flush=True)
 
     def log(result) -> None:
         print(f"[data {next(done)}/{total}] {result.path.parent.name}/{result.path.name}: {result.status}, "
               f"{result.seconds:.1f} s", flush=True)
 
     try:
-        generate_catalogue(root, distances, objects, SynthConfig(), log=log,
+        generate_catalogue(root, distances, objects, preset(synth), log=log,
                            on_wait=lambda: print(f"waiting for another process generating into {root}", flush=True))
     except ForeignRootError:
         print(f"{root} holds data the generator did not write: using it as it is", flush=True)
@@ -76,11 +78,12 @@ def _reason(stderr_tail: list[str]) -> str:
     return last[-1] if any(line.startswith("Traceback") for line in last) else last[0]
 
 
-def sweep(experiment: str, root: Path, out: Path, store: Path) -> pd.DataFrame:
+def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "realistic") -> pd.DataFrame:
     """One multirun into `out/<experiment>`; returns its merged rows. Job lines go to stdout as they finish;
     stderr is passed through and its tail kept, so a failure ends in the job's own reason (SweepFailed)."""
     command = [sys.executable, "-m", "bench", "-m", f"experiment={experiment}", f"hydra/launcher={LAUNCHER}",
-               "dataset=synthetic", f"dataset.root={root}", f"store.dir={store}", f"hydra.sweep.dir={out / experiment}",
+               "dataset=synthetic", f"dataset.root={root}", f"synth={synth}", f"store.dir={store}",
+               f"hydra.sweep.dir={out / experiment}",
                *QUIET]
     print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
     shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells
@@ -121,6 +124,8 @@ def main() -> int:
     parser.add_argument("--root", type=Path, default=Path("data/synthetic"), help="synthetic dataset root")
     parser.add_argument("--out", type=Path, default=Path("outputs/demo"), help="sweep roots and Table I go here")
     parser.add_argument("--store", type=Path, default=Path("outputs/store"), help="result store (cache)")
+    parser.add_argument("--synth", choices=["realistic", "ideal"], default="realistic",
+                        help="generator preset of the synthetic captures (configs/synth/)")
     parser.add_argument("--update-results", action="store_true",
                         help="also copy the tables, plots and baselines into --results (tracked files)")
     parser.add_argument("--results", type=Path, default=tables.RESULTS_DIR,
@@ -128,12 +133,12 @@ def main() -> int:
     args = parser.parse_args()
     root, out, store = args.root.resolve(), cli.output_dir(args.out).resolve(), args.store.resolve()
     started = time.perf_counter()
-    generate_dataset(root)
+    generate_dataset(root, synth=args.synth)
     texts = [f"Table I: frequency configurations\n\n{write_table1(out)}"]
     for experiment in EXPERIMENTS:
         sweep_started = time.perf_counter()
         try:
-            rows = sweep(experiment, root, out, store)
+            rows = sweep(experiment, root, out, store, synth=args.synth)
         except SweepFailed as err:
             print(f"error: {err}", file=sys.stderr)
             return 1

@@ -10,7 +10,7 @@ import pytest
 from bench import demo
 
 
-def _fake_sweep(experiment, root, out, store):
+def _fake_sweep(experiment, root, out, store, synth="realistic"):
     """What a finished sweep leaves in its root (bench.sweep), in miniature."""
     folder = out / experiment
     (folder / "depth_errors").mkdir(parents=True)
@@ -23,7 +23,7 @@ def _fake_sweep(experiment, root, out, store):
 
 
 def _main(monkeypatch, tmp_path, *args):
-    monkeypatch.setattr(demo, "generate_dataset", lambda root: None)
+    monkeypatch.setattr(demo, "generate_dataset", lambda root, synth: None)
     monkeypatch.setattr(demo, "sweep", _fake_sweep)
     monkeypatch.setattr(sys, "argv", ["bench.demo", "--root", str(tmp_path / "data"), "--out", str(tmp_path / "out"),
                                       "--store", str(tmp_path / "store"), "--results", str(tmp_path / "results"),
@@ -35,6 +35,16 @@ def test_outputs_stay_under_out(monkeypatch, tmp_path):
     assert _main(monkeypatch, tmp_path) == 0
     assert not (tmp_path / "results").exists()
     assert {p.name for p in (tmp_path / "out").iterdir()} == {"table1.csv", "table1.md", "table2", "table3"}
+
+
+def test_the_preset_reaches_generation_and_every_sweep(monkeypatch, tmp_path):
+    seen = []
+    monkeypatch.setattr(demo, "generate_dataset", lambda root, synth: seen.append(("data", synth)))
+    monkeypatch.setattr(demo, "sweep", lambda *a, synth: (seen.append((a[0], synth)), _fake_sweep(*a))[1])
+    monkeypatch.setattr(sys, "argv", ["bench.demo", "--root", str(tmp_path / "data"), "--out", str(tmp_path / "out"),
+                                      "--store", str(tmp_path / "store"), "--synth", "ideal"])
+    assert demo.main() == 0
+    assert seen == [("data", "ideal"), ("table2", "ideal"), ("table3", "ideal")]
 
 
 def test_update_results_copies_tables_plots_and_baselines(monkeypatch, tmp_path):
