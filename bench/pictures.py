@@ -278,7 +278,7 @@ def signed_error_cm(cell: CaptureArrays) -> np.ndarray:
     return (cell.depth_m - cell.gt_depth_m) * 100.0
 
 
-def _categories(cell: CaptureArrays) -> np.ndarray:
+def no_error_categories(cell: CaptureArrays) -> np.ndarray:
     """Masked overlay: NaN where an error is drawn, 0 = no depth, 1 = depth without ground truth."""
     overlay = np.full(cell.depth_m.shape, np.nan)
     overlay[~np.isfinite(cell.depth_m)] = 0
@@ -286,7 +286,7 @@ def _categories(cell: CaptureArrays) -> np.ndarray:
     return overlay
 
 
-def _crop_cm(cells: list[CaptureArrays], margin_cm: float = 1.0) -> tuple[tuple, tuple]:
+def crop_cm(cells: list[CaptureArrays], margin_cm: float = 1.0) -> tuple[tuple, tuple]:
     """x and y ranges (cm) around every pixel with a depth or a ground truth in any cell, plus a margin."""
     x_cm, y_cm = [], []
     for cell in cells:
@@ -305,7 +305,7 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
     """Per capture: ground truth and prior on top, then per cell depth, magnitude (dB) and signed error (cm)."""
     arrays = [cell for _, cell in cells]
     truth = arrays[0]
-    xlim, ylim = _crop_cm(arrays)
+    xlim, ylim = crop_cm(arrays)
     depth_cm = np.concatenate([a.depth_m[np.isfinite(a.depth_m)] for a in arrays] +
                               [truth.gt_depth_m[np.isfinite(truth.gt_depth_m)]]) * 100
     depth_range = (np.percentile(depth_cm, 1), np.percentile(depth_cm, 99)) if depth_cm.size else (20.0, 40.0)
@@ -347,7 +347,7 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
         show(axes[row, 2], error, error_map, -SIGNED_ERROR_LIMIT_CM, SIGNED_ERROR_LIMIT_CM,
              f"{label}: depth - ground truth", f"signed error (cm), saturates at ±{SIGNED_ERROR_LIMIT_CM:g}",
              extend="both")
-        axes[row, 2].imshow(_categories(cell), extent=truth.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
+        axes[row, 2].imshow(no_error_categories(cell), extent=truth.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
                             interpolation="nearest")
         axes[row, 2].set(xlim=xlim, ylim=ylim)
     fig.suptitle(f"{stem}: depth, magnitude and signed error per method (x, y in cm, radar space)", fontsize=9)

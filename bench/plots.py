@@ -1,17 +1,18 @@
-"""Figures of a sweep: runtime against error with the Pareto front, and per-capture depth-error maps (PNG)."""
+"""Figures of a sweep: runtime against error with the Pareto front, and per-capture signed depth-error maps (PNG)."""
 from __future__ import annotations
 
 from pathlib import Path
 
-import h5py
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the file-only backend)
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
 
-ERROR_LIMIT_CM = 2.0     # colour scale of the error maps: 0 .. 2 cm (larger errors saturate)
+ERROR_LIMIT_CM = 2.0     # colour scale of the signed error maps: -2 .. +2 cm (larger errors saturate)
 
 
 def pareto_front(runtime_ms: np.ndarray, error_cm: np.ndarray) -> np.ndarray:
@@ -27,7 +28,7 @@ def runtime_vs_error(summary: pd.DataFrame, path: Path, title: str) -> Path:
     marked and joined. Only rows with a runtime measured alone are drawn; rows that failed on some capture are
     drawn hollow and take no part in the front (their mean covers fewer captures)."""
     shown = summary[np.isfinite(summary.runtime_ms) & np.isfinite(summary.P_cm)]
-    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    fig, ax = plt.subplots(figsize=(8.5, 5.0))
     for method, group in shown.groupby("method", sort=False):
         colour = ax.scatter([], [], s=30).get_facecolor()[0]
         ax.scatter(group.runtime_ms, group.P_cm, label=method, s=30,
@@ -49,61 +50,55 @@ def runtime_vs_error(summary: pd.DataFrame, path: Path, title: str) -> Path:
                 transform=ax.transAxes)
     ax.grid(True, which="both", alpha=0.3)
     if len(shown):
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
 
 
-def _compared_extent_cm(h5_paths: list[Path], stem: str, margin_cm: float = 1.0) -> tuple[tuple, tuple]:
-    """(x range, y range) in cm of the pixels where any run has both a depth and ground truth, plus a margin."""
-    x_cm, y_cm = [], []
-    for h5_path in h5_paths:
-        with h5py.File(h5_path, "r") as h5:
-            if stem not in h5:
-                continue
-            group = h5[stem]
-            compared = np.isfinite(group["depth_m"][()] - group["gt_depth_m"][()])
-            (nx, ny, _), lo, hi = group.attrs["grid_size"], group.attrs["bb_min_m"] * 100, group.attrs["bb_max_m"] * 100
-        rows, cols = np.nonzero(compared)
-        x_cm.append(np.linspace(lo[0], hi[0], nx)[cols])
-        y_cm.append(np.linspace(hi[1], lo[1], ny)[rows])        # row 0 = +y
-    x_cm, y_cm = np.concatenate(x_cm), np.concatenate(y_cm)
-    if x_cm.size == 0:
-        return (lo[0], hi[0]), (lo[1], hi[1])
-    return (x_cm.min() - margin_cm, x_cm.max() + margin_cm), (y_cm.min() - margin_cm, y_cm.max() + margin_cm)
-
-
 def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path) -> list[Path]:
-    """One PNG per capture: |depth - ground truth| (cm) of every run side by side, on each run's pixel grid.
+    """One PNG per capture: the signed depth error (depth - ground truth, cm) of every run side by side.
 
-    runs: (label, arrays.h5 of the run) pairs; every capture group found in the files gets a figure.
+    Diverging colours (red: the radar put the surface behind the truth, blue: in front; a wrap shows its
+    direction), saturating at +-ERROR_LIMIT_CM; "no depth" in grey, depth where the ground truth has no surface in
+    black (bench.pictures). runs: (label, arrays.h5 of the run) pairs; every capture found gets a figure.
     """
-    stems = sorted({stem for _, h5_path in runs for stem in h5py.File(h5_path, "r")})
+    from bench import pictures
+
     out_dir.mkdir(parents=True, exist_ok=True)
+    error_map = plt.get_cmap("RdBu_r").with_extremes(bad=pictures.NO_DEPTH_COLOUR)
+    overlay_map = ListedColormap([pictures.NO_DEPTH_COLOUR, pictures.NO_TRUTH_COLOUR])
     paths = []
-    for stem in stems:
-        crop_cm = _compared_extent_cm([h5_path for _, h5_path in runs], stem)
-        ncols = min(len(runs), 7)
-        nrows = -(-len(runs) // ncols)
-        aspect = (crop_cm[1][1] - crop_cm[1][0]) / (crop_cm[0][1] - crop_cm[0][0])
-        fig, axes = plt.subplots(nrows, ncols, figsize=(2.2 * ncols + 1.0, (2.2 * aspect + 0.4) * nrows + 0.5),
+    for stem in pictures.capture_stems([h5_path for _, h5_path in runs]):
+        cells = [(label, arrays) for label, h5_path in runs
+                 if (arrays := pictures.read_arrays(h5_path, stem)) is not None]
+        xlim, ylim = pictures.crop_cm([arrays for _, arrays in cells])
+        ncols = min(len(cells), 7)
+        nrows = -(-len(cells) // ncols)
+        aspect = (ylim[1] - ylim[0]) / (xlim[1] - xlim[0])
+        fig, axes = plt.subplots(nrows, ncols, figsize=(2.4 * ncols + 1.6, (2.4 * aspect + 0.7) * nrows + 1.3),
                                  squeeze=False, layout="constrained")
-        for ax in axes.flat:
+        for ax in axes.flat[len(cells):]:
             ax.set_axis_off()
-        for ax, (label, h5_path) in zip(axes.flat, runs):
-            with h5py.File(h5_path, "r") as h5:
-                if stem not in h5:
-                    continue
-                group = h5[stem]
-                error_cm = np.abs(group["depth_m"][()] - group["gt_depth_m"][()]) * 100.0
-                (x0, y0, _), (x1, y1, _) = group.attrs["bb_min_m"] * 100, group.attrs["bb_max_m"] * 100
-            image = ax.imshow(error_cm, extent=(x0, x1, y0, y1), vmin=0, vmax=ERROR_LIMIT_CM, cmap="magma")
-            ax.set(xlim=crop_cm[0], ylim=crop_cm[1])
+        for ax, (label, arrays) in zip(axes.flat, cells):
+            image = ax.imshow(pictures.signed_error_cm(arrays), extent=arrays.extent_cm, cmap=error_map,
+                              vmin=-ERROR_LIMIT_CM, vmax=ERROR_LIMIT_CM, interpolation="nearest")
+            ax.imshow(pictures.no_error_categories(arrays), extent=arrays.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
+                      interpolation="nearest")
+            ax.set(xlim=xlim, ylim=ylim, xlabel="x (cm)", ylabel="y (cm)")
             ax.set_title(label, fontsize=8)
-        fig.colorbar(image, ax=axes, shrink=0.8, label=f"|depth error| (cm), saturates at {ERROR_LIMIT_CM}")
-        fig.suptitle(f"{stem}: depth error per method (x, y in cm; blank = no depth or no ground truth)", fontsize=9)
+            ax.tick_params(labelsize=7)
+            ax.xaxis.label.set_fontsize(7)
+            ax.yaxis.label.set_fontsize(7)
+        fig.colorbar(image, ax=axes, shrink=0.9, extend="both",
+                     label=f"depth - ground truth (cm), saturates at ±{ERROR_LIMIT_CM:g}")
+        fig.legend(handles=[Patch(color=pictures.NO_DEPTH_COLOUR, label="no depth"),
+                            Patch(color=pictures.NO_TRUTH_COLOUR, label="depth, no ground truth"),
+                            Patch(color=error_map(1.0), label="behind the surface"),
+                            Patch(color=error_map(0.0), label="in front of it")],
+                   loc="outside lower center", ncols=4, fontsize=7, frameon=False)
+        fig.suptitle(f"{stem}: signed depth error per method (radar space, x and y in cm)", fontsize=9)
         path = out_dir / f"{stem}.png"
         fig.savefig(path, dpi=100)
         plt.close(fig)

@@ -22,14 +22,34 @@ def depth_to_png_mm(depth_m: np.ndarray) -> np.ndarray:
     return depth_mm.astype(np.uint16)
 
 
+def write_depth_preview(path: Path, depth_m: np.ndarray) -> tuple[float, float]:
+    """A colour-mapped 8-bit view of a depth map for image viewers (the 16-bit PNG shows as black there):
+    viridis from the 1st to the 99th percentile of the valid depths, grey where there is no depth. Returns that
+    range in metres."""
+    from matplotlib import colormaps       # not pyplot: a run pays ~0.5 s for the colour map only
+    from PIL import Image
+
+    valid = depth_m[np.isfinite(depth_m)]
+    low_m, high_m = (float(np.percentile(valid, 1)), float(np.percentile(valid, 99))) if valid.size else (0.0, 1.0)
+    scaled = np.clip((depth_m - low_m) / max(high_m - low_m, 1e-6), 0.0, 1.0)
+    rgba = colormaps["viridis"].with_extremes(bad="#9a9a9a")(np.ma.masked_invalid(scaled), bytes=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(rgba[..., :3]).save(path)
+    return low_m, high_m
+
+
 def write_depth(out_dir: Path, stem: str, depth_m: np.ndarray, grid: RadarGrid) -> Path:
-    """`out_dir/depth/<stem>.png` (MAROON radar layout: row 0 = +y, column 0 = xmin) and `<stem>.json`."""
+    """`out_dir/depth/<stem>.png` (MAROON radar layout: row 0 = +y, column 0 = xmin) and `<stem>.json`, and a
+    colour-mapped preview `out_dir/depth_preview/<stem>.png` (its depth range in the JSON)."""
     depth_dir = out_dir / "depth"
     depth_dir.mkdir(parents=True, exist_ok=True)
     png = depth_dir / f"{stem}.png"
     write_uint16_png(png, depth_to_png_mm(depth_m))
+    low_m, high_m = write_depth_preview(out_dir / "depth_preview" / f"{stem}.png", depth_m)
     info = {"bb_min": list(grid.bb_min_m), "bb_max": list(grid.bb_max_m), "grid_size": list(grid.size),
-            "units": "uint16 millimetres, 0 = invalid, row 0 = +y, column 0 = xmin"}
+            "units": "uint16 millimetres, 0 = invalid, row 0 = +y, column 0 = xmin",
+            "preview": {"file": f"../depth_preview/{stem}.png", "colormap": "viridis", "vmin_m": low_m,
+                        "vmax_m": high_m, "no_depth": "grey"}}
     (depth_dir / f"{stem}.json").write_text(json.dumps(info, indent=2))
     return png
 

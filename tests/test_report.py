@@ -5,6 +5,7 @@ The sweep root is built here in miniature (two cells, two captures, 41 x 41 pixe
 """
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -161,3 +162,22 @@ def test_report_cli_mistakes_are_one_line(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "bench.report", str(tmp_path)], capture_output=True, text=True)
     assert proc.returncode == 2
     assert proc.stderr.strip() == f"error: {tmp_path}: not a sweep root: no results.csv and no <job>/results.csv"
+
+
+def test_depth_preview_beside_the_16_bit_data_is_viewable(tmp_path):
+    from PIL import Image
+
+    from bench.capture import RadarGrid
+    from bench.results import write_depth
+
+    depth = np.tile(np.linspace(0.25, 0.35, 50), (40, 1))         # depth grows to the right
+    depth[:5] = np.nan
+    write_depth(tmp_path, "cap", depth, RadarGrid((-0.1, -0.1, 0.2), (0.1, 0.1, 0.4), (50, 40, 21)))
+    preview = np.asarray(Image.open(tmp_path / "depth_preview" / "cap.png").convert("RGB")).astype(float)
+    assert preview.shape == (40, 50, 3)
+    assert (preview[:5] == preview[0, 0]).all() and len(set(preview[0, 0])) == 1     # no depth: one grey
+    luminance = preview[20] @ [0.299, 0.587, 0.114]
+    assert luminance[-1] - luminance[0] > 100 and np.all(np.diff(luminance) >= -1)    # viridis: far = bright
+    info = json.loads((tmp_path / "depth" / "cap.json").read_text())["preview"]
+    assert info["vmin_m"] == pytest.approx(np.percentile(depth[5:], 1))
+    assert np.asarray(Image.open(tmp_path / "depth" / "cap.png")).dtype == np.uint16   # the data is unchanged
