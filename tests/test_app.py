@@ -98,7 +98,7 @@ def test_experiments_sweep_the_papers_cells():
     two = ["d05", "d1", "d2", "d4", "d8", "d10"]
     assert _experiment_cells("table2") == [("mm2fsk", f, "photogrammetry", "from_capture") for f in two]
     table3 = _experiment_cells("table3")
-    assert table3 == ([("bp", f, "none", "bp_cpu") for f in ("full", "d05", "d1", "d10")]
+    assert table3 == ([("bp", f, "none", "paper") for f in ("full", "d05", "d1", "d10")]
                       + [("2fsk", f, "none", "from_capture") for f in ("d05", "d1", "d10")]
                       + [("3fsk", f, "none", "from_capture") for f in ("d05_d10", "d1_d10", "d2_d10")]
                       + [("mm2fsk", f, "realsense", "from_capture") for f in ("d05", "d1", "d10")])

@@ -21,9 +21,10 @@ def test_ground_truth_is_built_once_per_capture_for_every_cell(synth_root, tmp_p
     monkeypatch.setattr(app, "ground_truth", lambda capture, grid: calls.append(capture.name) or real(capture, grid))
     app._ground_truth.cache_clear()
     rows = [app.run(_cfg(synth_root, *cell), tmp_path / str(i))[0]
-            for i, cell in enumerate([["cell=mm2fsk_d10"], ["cell=2fsk_d05"], ["cell=bp_d05"]])]
+            for i, cell in enumerate([["cell=mm2fsk_d10"], ["cell=2fsk_d05"], ["cell=bp_d05", "grid=bp_cpu"]])]
     assert len(calls) == 1
-    # BP computed on its 51 x 51 grid, scored like the others on the capture's 301 x 301 grid: same GT points
+    # BP computed on the reduced 51 x 51 grid (grid=bp_cpu: quick), scored like the others on the capture's
+    # 301 x 301 grid: same GT points
     assert rows[2]["compute_grid_size"] == "51x51x21" and rows[0]["compute_grid_size"].startswith("301x301")
     assert len({row["C_g_px"] for row in rows}) == 1
     assert all(row["failure"] == "" for row in rows)
