@@ -6,7 +6,8 @@
    experiment=NAME hydra/launcher=basic` would: one job at a time, so every runtime in the tables is measured
    alone (rows get `timing=alone`; stored rows timed beside other jobs are re-measured). Finished cells come from
    the result store (`--store`), so a re-run computes only missing cells. Each job prints one progress line.
-3. Prints Tables I-III. Everything goes under `--out` (default outputs/demo): the sweep roots `<out>/table2|table3/`
+3. Prints Tables I-III and writes one HTML page, `<out>/report.html` (bench.report: every table with its spread
+   across captures, a per-object view, the runtime plot, paper-style pictures for table3), and prints its path. Everything goes under `--out` (default outputs/demo): the sweep roots `<out>/table2|table3/`
    and Table I `<out>/table1.*`. Tracked files are left alone unless `--update-results` is given: then Table I and
    each sweep's tables, plots and per-capture rows (the regression baselines) are copied into `--results`
    (default results/).
@@ -40,16 +41,23 @@ class SweepFailed(Exception):
     """A sweep exited non-zero; the message is the reason it printed (its last `error:` line)."""
 
 
-def generate_dataset(root: Path, synth: str = "realistic") -> None:
-    """The synthetic captures configs/dataset/synthetic.yaml asks for, generated here with the preset `synth`
-    (configs/synth/) before any sweep starts."""
-    from bench.synth import CATALOGUE, generate_catalogue
-    from bench.synth.config import preset
-    from bench.synth.ownership import ForeignRootError
+def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]:
+    """(objects, distances in cm) of the demo: configs/dataset/synthetic.yaml's, the distances replaced when given."""
+    from bench.synth import CATALOGUE
 
     settings = OmegaConf.load(CONFIG_DIR / "dataset" / "synthetic.yaml").generate
     objects = list(CATALOGUE) if settings.objects is None else list(settings.objects)
-    distances = list(settings.distances)
+    return objects, list(settings.distances) if distances_cm is None else list(distances_cm)
+
+
+def generate_dataset(root: Path, synth: str = "realistic", distances_cm: list[int] | None = None) -> None:
+    """The synthetic captures configs/dataset/synthetic.yaml asks for (at `distances_cm` when given), generated
+    here with the preset `synth` (configs/synth/) before any sweep starts."""
+    from bench.synth import generate_catalogue
+    from bench.synth.config import preset
+    from bench.synth.ownership import ForeignRootError
+
+    objects, distances = demo_captures(distances_cm)
     total, done = len(objects) * len(distances), itertools.count(1)
     print(f"synthetic dataset {root}: {total} captures, preset {synth}", flush=True)
 
@@ -78,11 +86,16 @@ def _reason(stderr_tail: list[str]) -> str:
     return last[-1] if any(line.startswith("Traceback") for line in last) else last[0]
 
 
-def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "realistic") -> pd.DataFrame:
+def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "realistic",
+          distances_cm: list[int] | None = None) -> pd.DataFrame:
     """One multirun into `out/<experiment>`; returns its merged rows. Job lines go to stdout as they finish;
-    stderr is passed through and its tail kept, so a failure ends in the job's own reason (SweepFailed)."""
+    stderr is passed through and its tail kept, so a failure ends in the job's own reason (SweepFailed).
+    `distances_cm`: only the demo's captures at these distances (default: the dataset config's)."""
+    objects, distances = demo_captures(distances_cm)
+    captures = ",".join(f"{name}/{distance}" for name in objects for distance in distances)
     command = [sys.executable, "-m", "bench", "-m", f"experiment={experiment}", f"hydra/launcher={LAUNCHER}",
                "dataset=synthetic", f"dataset.root={root}", f"synth={synth}", f"store.dir={store}",
+               f"dataset.captures=[{captures}]", f"dataset.generate.distances=[{','.join(map(str, distances))}]",
                f"hydra.sweep.dir={out / experiment}",
                *QUIET]
     print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
@@ -109,6 +122,15 @@ def publish(sweep_root: Path, rows: pd.DataFrame, table: str, results: Path) -> 
     rows.drop(columns="cached").to_csv(target / "results.csv", index=False)
 
 
+def report_page(out: Path) -> Path:
+    """`out/report.html` (bench.report) over the demo's sweep roots; pictures for table3, which holds every method
+    (they cost several seconds per capture and cell)."""
+    from bench import report
+
+    return report.write_report([out / name for name in EXPERIMENTS], out / "report.html",
+                               pictures=[out / "table3"])
+
+
 def write_table1(folder: Path) -> str:
     """Table I as `folder/table1.csv` and `.md`; returns its Markdown."""
     table1 = tables.table1()
@@ -126,6 +148,9 @@ def main() -> int:
     parser.add_argument("--store", type=Path, default=Path("outputs/store"), help="result store (cache)")
     parser.add_argument("--synth", choices=["realistic", "ideal"], default="realistic",
                         help="generator preset of the synthetic captures (configs/synth/)")
+    parser.add_argument("--distances", type=cli.positive_int, nargs="+", metavar="CM",
+                        help="object distances in cm (e.g. --distances 30 40 50; default: configs/dataset/"
+                             "synthetic.yaml, 30)")
     parser.add_argument("--update-results", action="store_true",
                         help="also copy the tables, plots and baselines into --results (tracked files)")
     parser.add_argument("--results", type=Path, default=tables.RESULTS_DIR,
@@ -133,12 +158,12 @@ def main() -> int:
     args = parser.parse_args()
     root, out, store = args.root.resolve(), cli.output_dir(args.out).resolve(), args.store.resolve()
     started = time.perf_counter()
-    generate_dataset(root, synth=args.synth)
+    generate_dataset(root, synth=args.synth, distances_cm=args.distances)
     texts = [f"Table I: frequency configurations\n\n{write_table1(out)}"]
     for experiment in EXPERIMENTS:
         sweep_started = time.perf_counter()
         try:
-            rows = sweep(experiment, root, out, store, synth=args.synth)
+            rows = sweep(experiment, root, out, store, synth=args.synth, distances_cm=args.distances)
         except SweepFailed as err:
             print(f"error: {err}", file=sys.stderr)
             return 1
@@ -150,6 +175,7 @@ def main() -> int:
         for experiment in EXPERIMENTS:
             publish(out / experiment, pd.read_csv(out / experiment / "results.csv"), experiment, args.results)
     print("\n\n".join(["", *texts]))
+    print(f"\nreport (tables, spread, per object, pictures; open in a browser): {report_page(out)}")
     copied = f"; tables, plots and baselines copied to {args.results}" if args.update_results else ""
     print(f"outputs under {out}{copied}; {time.perf_counter() - started:.0f} s in all")
     return 0

@@ -196,7 +196,7 @@ def _draw_perspective_matplotlib(ax, points: np.ndarray, colours: np.ndarray, gt
     ax.tick_params(labelsize=6)
 
 
-def _subsample(points: np.ndarray, *arrays: np.ndarray, at_most: int = 20000) -> tuple[np.ndarray, ...]:
+def _subsample(points: np.ndarray, *arrays: np.ndarray, at_most: int = 8000) -> tuple[np.ndarray, ...]:
     """Every k-th point so that at most `at_most` are drawn (matplotlib scatter cost), same rows of `arrays`."""
     step = max(1, -(-len(points) // at_most))
     return (points[::step], *(a[::step] for a in arrays))

@@ -225,9 +225,11 @@ def root_section(root: Path, pictures: bool) -> tuple[str, str]:
     return name, "\n".join(parts)
 
 
-def write_report(roots: list[Path], out: Path, pictures: bool = True) -> Path:
-    """The HTML page of the sweep roots at `out` (written atomically); returns `out`."""
-    sections = [root_section(root, pictures) for root in roots]
+def write_report(roots: list[Path], out: Path, pictures: bool | list[Path] = True) -> Path:
+    """The HTML page of the sweep roots at `out` (written atomically); returns `out`. `pictures`: for every root
+    (True), none (False) or the roots listed."""
+    chosen = [Path(p).resolve() for p in pictures] if isinstance(pictures, list) else None
+    sections = [root_section(root, bool(pictures) if chosen is None else root.resolve() in chosen) for root in roots]
     nav = " ".join(f"<a href='#{html.escape(name)}'>{html.escape(name)}</a>" for name, _ in sections)
     page = (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>mm2fsk-bench report</title>"
             f"<style>{_STYLE}</style></head><body><h1>mm2fsk-bench report</h1>"

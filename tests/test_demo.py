@@ -10,7 +10,7 @@ import pytest
 from bench import demo
 
 
-def _fake_sweep(experiment, root, out, store, synth="realistic"):
+def _fake_sweep(experiment, root, out, store, synth="realistic", distances_cm=None):
     """What a finished sweep leaves in its root (bench.sweep), in miniature."""
     folder = out / experiment
     (folder / "depth_errors").mkdir(parents=True)
@@ -23,8 +23,9 @@ def _fake_sweep(experiment, root, out, store, synth="realistic"):
 
 
 def _main(monkeypatch, tmp_path, *args):
-    monkeypatch.setattr(demo, "generate_dataset", lambda root, synth: None)
+    monkeypatch.setattr(demo, "generate_dataset", lambda root, synth, distances_cm=None: None)
     monkeypatch.setattr(demo, "sweep", _fake_sweep)
+    monkeypatch.setattr(demo, "report_page", lambda out: out / "report.html")      # tested in test_report.py
     monkeypatch.setattr(sys, "argv", ["bench.demo", "--root", str(tmp_path / "data"), "--out", str(tmp_path / "out"),
                                       "--store", str(tmp_path / "store"), "--results", str(tmp_path / "results"),
                                       *args])
@@ -37,14 +38,21 @@ def test_outputs_stay_under_out(monkeypatch, tmp_path):
     assert {p.name for p in (tmp_path / "out").iterdir()} == {"table1.csv", "table1.md", "table2", "table3"}
 
 
-def test_the_preset_reaches_generation_and_every_sweep(monkeypatch, tmp_path):
+def test_the_preset_and_distances_reach_generation_and_every_sweep(monkeypatch, tmp_path):
     seen = []
-    monkeypatch.setattr(demo, "generate_dataset", lambda root, synth: seen.append(("data", synth)))
-    monkeypatch.setattr(demo, "sweep", lambda *a, synth: (seen.append((a[0], synth)), _fake_sweep(*a))[1])
+    monkeypatch.setattr(demo, "generate_dataset", lambda root, synth, distances_cm: seen.append(("data", synth,
+                                                                                                 distances_cm)))
+    monkeypatch.setattr(demo, "sweep", lambda *a, synth, distances_cm: (seen.append((a[0], synth, distances_cm)),
+                                                                        _fake_sweep(*a))[1])
+    monkeypatch.setattr(demo, "report_page", lambda out: out / "report.html")
     monkeypatch.setattr(sys, "argv", ["bench.demo", "--root", str(tmp_path / "data"), "--out", str(tmp_path / "out"),
-                                      "--store", str(tmp_path / "store"), "--synth", "ideal"])
+                                      "--store", str(tmp_path / "store"), "--synth", "ideal", "--distances", "30",
+                                      "45"])
     assert demo.main() == 0
-    assert seen == [("data", "ideal"), ("table2", "ideal"), ("table3", "ideal")]
+    assert seen == [("data", "ideal", [30, 45]), ("table2", "ideal", [30, 45]), ("table3", "ideal", [30, 45])]
+    objects, distances = demo.demo_captures([30, 45])
+    assert distances == [30, 45] and "01_plate" in objects
+    assert demo.demo_captures(None)[1] == [30]                  # configs/dataset/synthetic.yaml
 
 
 def test_update_results_copies_tables_plots_and_baselines(monkeypatch, tmp_path):
