@@ -114,6 +114,14 @@ def rasterize_prior(points_m: np.ndarray, triangles: np.ndarray, grid: RadarGrid
     return delaunay_fill(prior_m) if faithful else fill_convex_hull(prior_m)
 
 
+def _bounding_box(valid: np.ndarray) -> tuple[slice, slice]:
+    """Rows and columns of an (H, W) bool image's bounding box of True pixels (empty slices when none)."""
+    rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    if not len(rows):
+        return slice(0, 0), slice(0, 0)
+    return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
+
+
 def realsense_prior_m(depth: DepthFrame, realsense2radar: np.ndarray, grid: RadarGrid,
                       fill_holes: bool = True, max_jump_mm: float | None = DEFAULT_MAX_JUMP_MM,
                       faithful: bool = False) -> np.ndarray:
@@ -123,6 +131,8 @@ def realsense_prior_m(depth: DepthFrame, realsense2radar: np.ndarray, grid: Rada
     points_mm, valid = backproject_mm(depth)
     points_m = apply_transform(realsense2radar, points_mm)
     cols, rows = _to_radar_pixels(points_m, grid, faithful)
+    if not faithful:   # the 'sound' rule sees each quad's own corners only: the valid pixels' bounding box suffices
+        valid = valid[_bounding_box(valid)]      # (masked objects: 3-10x fewer pixels; same triangles, same order)
     col_img, row_img = np.full(valid.shape, np.nan), np.full(valid.shape, np.nan)
     col_img[valid], row_img[valid] = cols, rows
     z_mm = np.zeros(valid.shape)
