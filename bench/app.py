@@ -199,7 +199,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     'parallel', see `timing_mode`) goes into every computed row; with 'alone' a stored row whose runtime was not
     measured alone is recomputed, so a contended runtime never passes for a clean one.
     """
-    from methods.correlate import resolve_device
+    from methods.backend import resolve_device
 
     root = Path(to_absolute_path(str(cfg.dataset.root)))
     if generate:

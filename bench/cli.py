@@ -37,7 +37,7 @@ class UserError(Exception):
 
 def error_line(err: BaseException) -> str | None:
     """The one-line message (without `error: `) for an error a user can fix, or None for a bug."""
-    from methods.correlate import DeviceUnavailableError
+    from methods.backend import DeviceUnavailableError
 
     if isinstance(err, (DatasetError, UserError)):
         return str(err)
@@ -155,10 +155,10 @@ def output_file(path: str | Path) -> Path:
 
 
 def resolve_device(device: str, option: str = "--device ") -> str:
-    """methods.correlate.resolve_device, with an unusable device as a UserError that spells `option`
+    """methods.backend.resolve_device, with an unusable device as a UserError that spells `option`
     (`"--device "` for argparse, `"device="` for Hydra overrides)."""
-    from methods.correlate import DEVICES, DeviceUnavailableError
-    from methods.correlate import resolve_device as resolve
+    from methods.backend import DEVICES, DeviceUnavailableError
+    from methods.backend import resolve_device as resolve
 
     if device not in DEVICES:
         raise UserError(f"{option}{device}", f"unknown device (choose from {', '.join(DEVICES)})")

@@ -132,9 +132,9 @@ def kernel_ms(device, signal, freqs_hz, ant, impl, repeat, points_m=None, grid_m
     if device != "cuda":
         return ""
     import warp as wp
-    from methods.backend_warp import make_launch
-    run = make_launch(signal, freqs_hz, ant.tx_m, ant.rx_m, device=device, kernel=impl, points_m=points_m,
-                      grid_m=grid_m)
+    from methods.backend import backend_for
+    run = backend_for(device).make_launch(signal, freqs_hz, ant.tx_m, ant.rx_m, kernel=impl, points_m=points_m,
+                                          grid_m=grid_m)
     first = median_ms(run, 1, sync=wp.synchronize)
     batch = 1 if first > 5.0 else 20          # short kernels: launches queued back to back, one sync per batch
 

@@ -29,6 +29,7 @@ from bench.maroon import discover_captures, read_capture
 from bench.perf_frames import DEFAULT_OUT, write_rows
 from methods import reconstruct
 from methods.api import frequency_indices, prior_image_m
+from methods.backend import backend_for
 from methods.mm2fsk import reconstruct_mm2fsk
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
@@ -68,13 +69,13 @@ def _cell_call(capture: Capture, cell: dict, device: str, grid: RadarGrid):
 
 def _shared_mm2fsk(capture: Capture, cells: list[dict], device: str, grid: RadarGrid) -> list:
     """The MM-2FSK cells of one capture on one prior image (built once): their Reconstructions."""
-    prior = prior_image_m(capture, cells[0]["prior"], grid, device)
+    prior = prior_image_m(capture, cells[0]["prior"], grid, device, keep_on_device=True)
     frame = capture.radar
     results = []
     for cell in cells:
         idx = frequency_indices(frame.freqs_hz, cell["f_ghz"])
         results.append(reconstruct_mm2fsk(np.ascontiguousarray(frame.signal[:, :, idx]), frame.freqs_hz[idx],
-                                          capture.antennas, grid, prior, device=device))
+                                          capture.antennas, grid, prior, backend=backend_for(device)))
     return results
 
 

@@ -18,12 +18,12 @@ import numpy as np
 
 from bench.capture import Capture, RadarGrid
 from methods.bp import reconstruct_bp
-from methods.correlate import correlate, correlate_volume, resolve_device
+from methods.backend import Backend, backend_for
 from methods.frequencies import config_indices, select_frequencies
 from methods.fsk import DEFAULT_PRIOR_M, reconstruct_2fsk
 from methods.fsk3 import reconstruct_3fsk
 from methods.mm2fsk import reconstruct_mm2fsk
-from methods.prior import mesh_prior_m, realsense_prior_m
+from methods.prior_image import Prior
 from methods.reconstruction import Reconstruction
 from methods.roi import Roi, full_roi, intersect, roi_from_mask_bb
 from methods.skips import SkipSettings, resolve
@@ -59,25 +59,22 @@ def _transform(capture: Capture, key: str) -> np.ndarray:
     return capture.transforms[key]
 
 
-def prior_image_m(capture: Capture, source: str, grid: RadarGrid, device: str = "cpu") -> np.ndarray:
-    """Per-pixel prior (ny, nx) in metres on `grid` from 'realsense' or 'photogrammetry'; NaN = no prior.
-
-    device="cuda": rasterised on the GPU, returned as a `methods.prior_warp.DevicePrior` (np.asarray copies it)."""
-    if device == "cuda":
-        from methods import prior_warp
-        realsense_prior, mesh_prior = prior_warp.realsense_prior_device, prior_warp.mesh_prior_device
-    else:
-        realsense_prior, mesh_prior = realsense_prior_m, mesh_prior_m
+def prior_image_m(capture: Capture, source: str, grid: RadarGrid, device: str | Backend = "cpu",
+                  keep_on_device: bool = False) -> Prior:
+    """Per-pixel prior (ny, nx) in metres on `grid` from 'realsense' or 'photogrammetry' (NaN = no prior), as a
+    `Prior`: rasterised on the backend's device with `keep_on_device` where it can (np.asarray copies it back)."""
+    backend = backend_for(device)
     notes = f" ({'; '.join(capture.notes)})" if capture.notes else ""
     if source == "realsense":
         if capture.realsense is None:
             raise ValueError(f"prior='realsense' needs a RealSense depth frame, but capture {capture.name} "
                              f"has none{notes}")
-        return realsense_prior(capture.realsense, _transform(capture, "realsense2radar"), grid)
+        return backend.realsense_prior(capture.realsense, _transform(capture, "realsense2radar"), grid,
+                                       keep_on_device)
     if capture.mesh is None:
         raise ValueError(f"prior='photogrammetry' needs the photogrammetry mesh, but capture {capture.name} "
                          f"has none{notes}")
-    return mesh_prior(capture.mesh, _transform(capture, "photogrammetry2radar"), grid)
+    return backend.mesh_prior(capture.mesh, _transform(capture, "photogrammetry2radar"), grid, keep_on_device)
 
 
 def frequency_indices(freqs_hz: np.ndarray, freq: str | Sequence[float] | None) -> np.ndarray:
@@ -126,7 +123,8 @@ def _check_signal(capture: Capture, signal: np.ndarray) -> None:
 
 def capture_roi(capture: Capture, grid: RadarGrid, skips: SkipSettings) -> Roi:
     """The ROI the capture itself gives before any pass: its metadata mask_bb's x/y bounds (`skips.mask_bb`) and z
-    bounds (`skips.mask_bb_depth`) (methods.roi), else the whole grid. The prior's footprint and the coarse pass narrow it inside the methods."""
+    bounds (`skips.mask_bb_depth`) (methods.roi), else the whole grid. The prior's footprint and the coarse pass
+    narrow it inside the methods."""
     roi = full_roi(grid)
     bounds = capture.metadata.mask_bb_m
     if skips.mask_bb:
@@ -134,27 +132,6 @@ def capture_roi(capture: Capture, grid: RadarGrid, skips: SkipSettings) -> Roi:
     if skips.mask_bb_depth:
         roi = intersect(roi, roi_from_mask_bb({k: v for k, v in bounds.items() if k[0] == "z"}, grid))
     return roi
-
-
-_warmed_up: set[tuple[str, str, int]] = set()
-
-
-def _warm_up(signal: np.ndarray, freqs_hz: np.ndarray, capture: Capture, device: str, method: str) -> None:
-    """Compile the device kernels on a tiny problem so that the timed run excludes compilation.
-
-    Once per process for each (device, method, number of frequencies): later calls return at once (a per-call
-    warm-up cost ~48 ms per BP_max call and 1-3 ms per other call, round 5)."""
-    key = (device, method, len(freqs_hz))
-    if key in _warmed_up:
-        return
-    tx_m, rx_m = capture.antennas.tx_m, capture.antennas.rx_m
-    correlate(signal, freqs_hz, tx_m, rx_m, np.array([[0.0, 0.0, 0.3]]), device=device)
-    if method == "bp":
-        correlate_volume(signal, freqs_hz, tx_m, rx_m, [0.0], [0.0], [0.3, 0.301], device=device)
-    if method == "mm2fsk" and device == "cuda":
-        from methods import prior_warp
-        prior_warp.load(device)
-    _warmed_up.add(key)
 
 
 def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | None,
@@ -183,13 +160,13 @@ def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | Non
     invalid_reason = None
     _check(method, freq, len(indices), prior_value, params)
     skips = resolve(roi, method, len(indices))
-    device = resolve_device(device)
+    backend = backend_for(device)
     grid = grid or frame.grid
     signal = np.ascontiguousarray(frame.signal[:, :, indices])
     _check_signal(capture, signal)
     freqs_hz = frame.freqs_hz[indices]
-    if device != "cpu":
-        _warm_up(signal, freqs_hz, capture, device, method)
+    backend.warm_up(signal, freqs_hz, capture.antennas.tx_m, capture.antennas.rx_m, volume=method == "bp",
+                    prior=method == "mm2fsk")
 
     scalar_prior_m = float(params.pop("scalar_prior_m", DEFAULT_PRIOR_M))
     timer = StageTimer()
@@ -197,23 +174,24 @@ def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | Non
     region = capture_roi(capture, grid, skips)
     if prior_value in SENSOR_PRIORS:
         with timer.stage("prior"):
-            prior_m = prior_image_m(capture, prior_value, grid, device if method == "mm2fsk" else "cpu")
-        # an explicit all-invalid result (extra["invalid_reason"]) below; a GPU prior knows its covered count
-        if not (prior_m.n_covered if hasattr(prior_m, "n_covered") else np.isfinite(prior_m).any()):
+            sensor_prior = prior_image_m(capture, prior_value, grid, backend, keep_on_device=method == "mm2fsk")
+        # an explicit all-invalid result (extra["invalid_reason"]) below
+        if not sensor_prior.n_covered:
             invalid_reason = f"the {prior_value} prior of capture {capture.name} covers no radar pixel"
+        prior_m = sensor_prior.host_m() if method == "bp" else sensor_prior
     else:
         prior_m = prior_value
     if method == "bp":
-        result = reconstruct_bp(signal, freqs_hz, antennas, grid, prior_m=prior_m, device=device, timer=timer,
+        result = reconstruct_bp(signal, freqs_hz, antennas, grid, prior_m=prior_m, backend=backend, timer=timer,
                                 roi=region, skips=skips, **params)
     elif method == "mm2fsk":
-        result = reconstruct_mm2fsk(signal, freqs_hz, antennas, grid, prior_m, device=device, timer=timer,
+        result = reconstruct_mm2fsk(signal, freqs_hz, antennas, grid, prior_m, backend=backend, timer=timer,
                                     roi=region, **params)
     else:
         run = reconstruct_2fsk if method == "2fsk" else reconstruct_3fsk
         result = run(signal, freqs_hz, antennas, grid, prior_m=scalar_prior_m if prior_m is None else prior_m,
-                     device=device, roi=region, skips=skips, **params)
+                     backend=backend, roi=region, skips=skips, **params)
     if invalid_reason is None and not result.valid.any():
         invalid_reason = "no pixel has a nonzero magnitude within the filter threshold (a frame without signal?)"
-    result.extra.update(freq=freq, prior=prior, device=device, invalid_reason=invalid_reason)
+    result.extra.update(freq=freq, prior=prior, device=backend.name, invalid_reason=invalid_reason)
     return result

@@ -17,6 +17,10 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from methods.backend import Backend, check_inputs, grid_vectors
+from methods.depth_peak import peak_depth_m
+from methods.timing import StageTimer
+
 C_M_PER_S = 299_792_458.0
 CHUNK_POINTS = 2048     # points per block: keeps the (chunk x 2*94) float32 work arrays in L2 cache
 
@@ -26,7 +30,7 @@ def _n_threads() -> int:
     return max(1, int(os.environ.get("CORRELATE_THREADS", "0")) or (os.cpu_count() or 1))
 
 
-def _path_excess_m(points_m: np.ndarray, norm_m: np.ndarray, ant_m: np.ndarray) -> np.ndarray:
+def path_excess_m(points_m: np.ndarray, norm_m: np.ndarray, ant_m: np.ndarray) -> np.ndarray:
     """`|p - q| - |p|` in float32 for points (n, 3) and antennas (A, 3), metres, cancellation-free."""
     p32 = points_m.astype(np.float32)
     q32 = ant_m.astype(np.float32)
@@ -41,7 +45,7 @@ def _path_excess_m(points_m: np.ndarray, norm_m: np.ndarray, ant_m: np.ndarray) 
     return num
 
 
-def _phasor_mod_2pi(cycles: np.ndarray) -> np.ndarray:
+def phasor_mod_2pi(cycles: np.ndarray) -> np.ndarray:
     """complex64 exp(j 2 pi cycles) for float64 `cycles`, reduced to [-0.5, 0.5] before float32."""
     frac = (cycles - np.rint(cycles)).astype(np.float32) * np.float32(2.0 * np.pi)
     out = np.empty(frac.shape, dtype=np.complex64)
@@ -62,8 +66,8 @@ def _correlate_chunk(signal_blocks, wavenumbers_rad_per_m, tx_m, rx_m, points_m,
     n = len(points_m)
     n_rx, n_tx = len(rx_m), len(tx_m)
     norm_m = np.sqrt(np.einsum("ni,ni->n", points_m, points_m))          # float64 |p|
-    excess_rx = _path_excess_m(points_m, norm_m, rx_m)                   # (n, R) float32
-    excess_tx = _path_excess_m(points_m, norm_m, tx_m)                   # (n, T) float32
+    excess_rx = path_excess_m(points_m, norm_m, rx_m)                   # (n, R) float32
+    excess_tx = path_excess_m(points_m, norm_m, tx_m)                   # (n, T) float32
     steer_rx = np.empty((n, 2 * n_rx), dtype=np.float32)                 # [cos | sin]
     phase_rx = np.empty((n, n_rx), dtype=np.float32)
     phase_tx = np.empty((n, n_tx), dtype=np.float32)
@@ -81,7 +85,7 @@ def _correlate_chunk(signal_blocks, wavenumbers_rad_per_m, tx_m, rx_m, points_m,
         zr, zi = prod[:, :n_tx], prod[:, n_tx:]
         re = np.einsum("nt,nt->n", zr, cos_tx) - np.einsum("nt,nt->n", zi, sin_tx)
         im = np.einsum("nt,nt->n", zr, sin_tx) + np.einsum("nt,nt->n", zi, cos_tx)
-        common = _phasor_mod_2pi(norm_m * (2.0 * k / (2.0 * np.pi)))
+        common = phasor_mod_2pi(norm_m * (2.0 * k / (2.0 * np.pi)))
         out[i].real = re
         out[i].imag = im
         out[i] *= common
@@ -114,3 +118,38 @@ def correlate_numpy(signal: np.ndarray, freqs_hz: np.ndarray, tx_m: np.ndarray, 
         with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(n_threads) as pool:
             list(pool.map(work, starts))
     return out
+
+
+class NumpyBackend(Backend):
+    """The CPU default ("cpu"): `correlate_numpy` on worker threads; volumes plane by plane; priors on the host."""
+
+    name = "cpu"
+    host_range_search = True
+
+    def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m) -> np.ndarray:
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        return correlate_numpy(signal, freqs_hz, tx_m, rx_m, np.asarray(points_m, dtype=np.float64).reshape(-1, 3))
+
+    def correlate_summed(self, signal, freqs_hz, tx_m, rx_m, points_m) -> np.ndarray:
+        return self.correlate(signal, freqs_hz, tx_m, rx_m, points_m).sum(axis=0)
+
+    def volume(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, method: str = "auto") -> np.ndarray:
+        if method not in ("auto", "direct", "range"):
+            raise ValueError(f"method must be 'auto', 'direct' or 'range', got {method!r}")
+        if method == "range":
+            raise ValueError("range compression runs on Warp devices ('cuda', 'warp-cpu'), not on device='cpu'")
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        x_m, y_m, z_m = grid_vectors(x_m, y_m, z_m)
+        out = np.empty((len(z_m), len(y_m), len(x_m)), dtype=np.complex64)
+        yy, xx = np.meshgrid(y_m, x_m, indexing="ij")
+        for iz, z in enumerate(z_m):
+            plane_m = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)], axis=1)
+            out[iz] = self.correlate_summed(signal, freqs_hz, tx_m, rx_m, plane_m).reshape(xx.shape)
+        return out
+
+    def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None):
+        timer = timer or StageTimer()
+        with timer.stage("correlate"):
+            volume = self.volume(signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m)
+        with timer.stage("depth"):
+            return peak_depth_m(np.abs(volume), float(np.asarray(z_m, dtype=np.float64)[0]), dz_m)

@@ -22,7 +22,8 @@ import numpy as np
 from bench.antennas import AntennaArray
 from bench.capture import RadarGrid
 from methods import bp_search, range_cpu
-from methods.correlate import correlate, correlate_volume
+from methods.backend import Backend, backend_for
+from methods.depth_peak import peak_depth_m
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
 from methods.reconstruction import Reconstruction
 from methods.roi import Roi, full_roi, intersect, pixel_pitch_m
@@ -32,42 +33,14 @@ from methods.timing import StageTimer
 DEFAULT_BAND_M = 0.05
 
 
-def peak_depth_m(magnitude: np.ndarray, z_first_m: np.ndarray | float, dz_m: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Parabola-refined depth and max projection from |V| profiles (K, ...) sampled at z_first + k dz.
-
-    Returns (depth_m, max_projection), each of the trailing shape of `magnitude`.
-    """
-    n_z = magnitude.shape[0]
-    k_best = np.argmax(magnitude, axis=0)
-
-    def pick(k: np.ndarray) -> np.ndarray:
-        return np.take_along_axis(magnitude, np.clip(k, 0, n_z - 1)[None], axis=0)[0]
-
-    peak = pick(k_best)
-    tiny = np.finfo(np.float32).tiny
-    db_minus, db_0, db_plus = (20.0 * np.log10(np.maximum(pick(k_best + s), tiny).astype(np.float64))
-                               for s in (-1, 0, 1))
-    curvature = db_minus - 2.0 * db_0 + db_plus
-    safe = np.where(curvature < 0, curvature, -1.0)
-    offset = np.where(curvature < 0, 0.5 * (db_minus - db_plus) / safe, 0.0)
-    return z_first_m + (k_best + offset) * dz_m, peak.astype(np.float64)
+def _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, backend: Backend, timer):
+    """Depth and max projection (ny, nx) from the rectangular volume x_m x y_m (descending) x z_m (on a Warp backend
+    the volume stays there; only the (ny, nx) maps come back)."""
+    return backend.volume_peak(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m, grid.y_m[::-1], z_m, dz_m,
+                               timer=timer)
 
 
-def _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, device, timer):
-    """Depth and max projection (ny, nx) from the rectangular volume x_m x y_m (descending) x z_m."""
-    if device != "cpu":              # Warp: argmax + parabola on the device; only the (ny, nx) maps come back
-        from methods.correlate import volume_peak_depth
-        return volume_peak_depth(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m, grid.y_m[::-1], z_m,
-                                 device=device, timer=timer)
-    with timer.stage("correlate"):
-        volume = correlate_volume(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m, grid.y_m[::-1], z_m,
-                                  device=device)
-    with timer.stage("depth"):
-        return peak_depth_m(np.abs(volume), float(z_m[0]), dz_m)
-
-
-def _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, device, timer, pixels=None):
+def _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, backend, timer, pixels=None):
     """Depth and max projection (ny, nx) from per-pixel profiles prior + k dz, |k dz| <= band_m; NaN: no prior
     (or outside `pixels`, the ROI's pixels, when given)."""
     has_prior = np.isfinite(prior_m) if pixels is None else np.isfinite(prior_m) & pixels
@@ -77,8 +50,8 @@ def _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, devic
     points_m = np.stack(np.broadcast_arrays(x_m[has_prior][None], y_m[has_prior][None],
                                             prior_m[has_prior][None] + steps_m[:, None]), axis=-1)
     with timer.stage("correlate"):
-        profiles = correlate(signal, freqs_hz, antennas.tx_m, antennas.rx_m, points_m.reshape(-1, 3),
-                             sum_freqs=True, device=device).reshape(len(steps_m), -1)
+        profiles = backend.correlate(signal, freqs_hz, antennas.tx_m, antennas.rx_m,
+                                     points_m.reshape(-1, 3)).sum(axis=0).reshape(len(steps_m), -1)
     with timer.stage("depth"):
         depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
         depth_m[has_prior], max_proj[has_prior] = peak_depth_m(np.abs(profiles), prior_m[has_prior] + steps_m[0],
@@ -86,22 +59,15 @@ def _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, devic
     return depth_m, max_proj
 
 
-def _evaluator(signal, freqs_hz, antennas, device, use_range, points_hull_m):
+def _evaluator(signal, freqs_hz, antennas, backend: Backend, use_range, points_hull_m):
     """Frequency-summed correlation at points: the CPU range-compressed gather (table built once over the paths
-    of `points_hull_m`, the corners of every point the search may evaluate), the Warp point kernel summing on the
-    device (CUDA: tensor cores), or the API's per-frequency sum."""
+    of `points_hull_m`, the corners of every point the search may evaluate), or the backend's sum over
+    frequencies (on a Warp backend the sum is taken there and only (N,) values come back)."""
     if use_range:
         table = range_cpu.range_table(signal, freqs_hz, *range_cpu.path_bounds_m(antennas.tx_m, antennas.rx_m,
                                                                                  points_hull_m))
         return lambda points_m: range_cpu.correlate_range_cpu(table, antennas.tx_m, antennas.rx_m, points_m)
-    if device != "cpu":              # Warp: the frequency sum on the device, only (N,) values come back
-        from methods import backend_warp
-        sig = np.ascontiguousarray(signal, dtype=np.complex64)
-        return lambda points_m: backend_warp.correlate_warp(sig, np.asarray(freqs_hz, dtype=np.float64),
-                                                            antennas.tx_m, antennas.rx_m, points_m, device=device,
-                                                            sum_freqs=True)
-    return lambda points_m: correlate(signal, freqs_hz, antennas.tx_m, antennas.rx_m, points_m, sum_freqs=True,
-                                      device=device)
+    return lambda points_m: backend.correlate_summed(signal, freqs_hz, antennas.tx_m, antennas.rx_m, points_m)
 
 
 def _box_corners_m(x_m, y_m, z_m) -> np.ndarray:
@@ -120,20 +86,20 @@ def _plan_of(freqs_hz, antennas, z_m, dz_m, skips: SkipSettings):
 
 
 def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi: Roi, skips: SkipSettings,
-                      threshold_db, device, timer, extra: dict):
+                      threshold_db, backend, timer, extra: dict):
     """Depth and max projection (ny, nx) over the ROI's pixels and the depths z_m (z_outer, the grid's or the prior
     band's depths, cut to the ROI): coarse ROI, coarse-to-fine search, range compression as `skips` say; NaN
     outside the ROI. A peak on a depth edge of z_m that is not an edge of z_outer gives NaN (bp_search)."""
     x_img, y_img = grid.pixel_xy_m()
     z_edges = ((len(z_m) > 0 and bool(np.isclose(z_m[0], z_outer[0], atol=1e-9))),
                (len(z_m) > 0 and bool(np.isclose(z_m[-1], z_outer[-1], atol=1e-9))))
-    use_range = skips.bp_range_cpu and device == "cpu" and range_cpu.worth_it(freqs_hz)
+    use_range = skips.bp_range_cpu and backend.host_range_search and range_cpu.worth_it(freqs_hz)
     pixels = roi.pixels
     n_evaluated, plan = 0, None
     depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
     with timer.stage("correlate"):
         if pixels.any() and len(z_m):
-            evaluate = _evaluator(signal, freqs_hz, antennas, device, use_range,
+            evaluate = _evaluator(signal, freqs_hz, antennas, backend, use_range,
                                   _box_corners_m(x_img[pixels], y_img[pixels], z_m))
             # the plan from the depths before the coarse ROI narrows them: its nearest depth (the sharpest focus)
             # depends on the grid and mask_bb only, so it is computed once per configuration (bp_search cache)
@@ -163,16 +129,14 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
     return depth_m, max_proj
 
 
-def _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi: Roi, device, timer, extra: dict):
+def _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi: Roi, backend, timer, extra: dict):
     """Warp devices: the rectangular volume over the ROI's bounding box (rows, columns, z_m), NaN outside the ROI."""
     rows, cols = np.nonzero(roi.pixels)
     depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
     if len(rows) and len(z_m):
         r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
-        y_desc = grid.y_m[::-1]
-        from methods.correlate import volume_peak_depth
-        box_depth, box_proj = volume_peak_depth(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m[c0:c1],
-                                                y_desc[r0:r1], z_m, device=device, timer=timer)
+        box_depth, box_proj = backend.volume_peak(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m[c0:c1],
+                                                  grid.y_m[::-1][r0:r1], z_m, dz_m, timer=timer)
         inside = roi.pixels[r0:r1, c0:c1]
         depth_m[r0:r1, c0:c1] = np.where(inside, box_depth, np.nan)
         max_proj[r0:r1, c0:c1] = np.where(inside, box_proj, np.nan)
@@ -184,7 +148,7 @@ def _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi: Roi, dev
 
 def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                    prior_m: float | np.ndarray | None = None, band_m: float = DEFAULT_BAND_M,
-                   threshold_db: float | None = DEFAULT_THRESHOLD_DB, device: str = "cpu",
+                   threshold_db: float | None = DEFAULT_THRESHOLD_DB, backend: Backend | str = "cpu",
                    timer: StageTimer | None = None, roi: Roi | None = None,
                    skips: SkipSettings = NONE) -> Reconstruction:
     """BP depth map on `grid` from `signal` (n_rx, n_tx, F) at `freqs_hz`; see the module doc for `prior_m`.
@@ -193,6 +157,7 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
     switches the coarse ROI, the coarse-to-fine search and CPU range compression (the last two on the CPU only).
     """
     timer = timer or StageTimer()
+    backend = backend_for(backend)
     z_m = grid.z_m
     if len(z_m) < 2:
         raise ValueError("BP needs a z grid with at least two samples")
@@ -201,7 +166,7 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
     extra: dict = {"band_m": None if prior_m is None else band_m}
     if prior_m is not None and not np.isscalar(prior_m):
         pixels = None if roi.pixels.all() else roi.pixels
-        depth_m, max_proj = _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, device, timer,
+        depth_m, max_proj = _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, backend, timer,
                                           pixels)
         extra.update(roi_px=int((np.isfinite(prior_m) & roi.pixels).sum()), roi_sources=roi.sources + ("prior",))
     else:
@@ -212,16 +177,16 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
         z_outer = z_m                          # the depths today's computation searches (grid, or prior band)
         z_m = z_outer[roi.z_indices(z_outer)]
         roi_cuts = not roi.pixels.all() or len(z_m) != len(z_outer)
-        searched = skips.coarse_roi or skips.bp_coarse_to_fine or (device == "cpu" and skips.bp_range_cpu and
-                                                                   range_cpu.worth_it(freqs_hz))
-        if searched or (device == "cpu" and roi_cuts):
+        host_range = backend.host_range_search and skips.bp_range_cpu and range_cpu.worth_it(freqs_hz)
+        searched = skips.coarse_roi or skips.bp_coarse_to_fine or host_range
+        if searched or (roi_cuts and not backend.prefers_box_volume):
             depth_m, max_proj = _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi, skips,
-                                                  threshold_db, device, timer, extra)
+                                                  threshold_db, backend, timer, extra)
         elif roi_cuts:
-            depth_m, max_proj = _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi, device, timer,
+            depth_m, max_proj = _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi, backend, timer,
                                                   extra)
         else:
-            depth_m, max_proj = _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, device, timer)
+            depth_m, max_proj = _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, backend, timer)
             extra.update(roi_px=roi.n_pixels, evaluated_voxels=roi.n_pixels * len(z_m), roi_sources=roi.sources)
     with timer.stage("filter"):
         depth_m = filter_depth(depth_m, max_proj, threshold_db)

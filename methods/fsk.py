@@ -20,7 +20,8 @@ import numpy as np
 
 from bench.antennas import AntennaArray
 from bench.capture import RadarGrid
-from methods.correlate import C_M_PER_S, correlate
+from methods.backend import Backend, backend_for
+from methods.correlate import C_M_PER_S
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
 from methods.keep_skip import run_where_kept
 from methods.reconstruction import Reconstruction
@@ -38,10 +39,11 @@ def depth_correction_m(c_lo: np.ndarray, c_hi: np.ndarray, f_lo_hz: float, f_hi_
 
 
 def correlate_pixels(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray,
-                     y_m: np.ndarray, z_m: np.ndarray | float, device: str) -> np.ndarray:
-    """Residual phasors (F, N) at the points (x_m, y_m, z_m), each (N,) (z may be a scalar)."""
+                     y_m: np.ndarray, z_m: np.ndarray | float, backend: Backend | str) -> np.ndarray:
+    """Residual phasors (F, N) at the points (x_m, y_m, z_m), each (N,) (z may be a scalar), on `backend` (or a
+    device name)."""
     points_m = np.column_stack([x_m, y_m, np.broadcast_to(z_m, np.shape(x_m))])
-    return correlate(signal, freqs_hz, antennas.tx_m, antennas.rx_m, points_m, device=device)
+    return backend_for(backend).correlate(signal, freqs_hz, antennas.tx_m, antennas.rx_m, points_m)
 
 
 def mean_phasor_magnitude(phasors: np.ndarray) -> np.ndarray:
@@ -50,12 +52,12 @@ def mean_phasor_magnitude(phasors: np.ndarray) -> np.ndarray:
 
 
 def first_pass_z1_m(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray,
-                    y_m: np.ndarray, prior_m: float, device: str, timer: StageTimer) -> tuple[float, dict]:
+                    y_m: np.ndarray, prior_m: float, backend: Backend, timer: StageTimer) -> tuple[float, dict]:
     """Pass 1 of 2FSK: correlate the pixels (x_m, y_m) (N,) at the scalar prior; the strongest pixel's correction
     gives the common guess z1 (m). Returns (z1, details). `signal` (n_rx, n_tx, 2) holds f_lo < f_hi."""
     f_lo, f_hi = freqs_hz
     with timer.stage("correlate"):
-        first = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, prior_m, device)
+        first = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, prior_m, backend)
     with timer.stage("depth"):
         ref = int(np.argmax(np.abs(first[0])))
         z1_m = prior_m - float(depth_correction_m(first[0, ref], first[1, ref], f_lo, f_hi))
@@ -63,24 +65,24 @@ def first_pass_z1_m(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaA
 
 
 def second_pass(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray,
-                y_m: np.ndarray, z1_m: float, device: str, timer: StageTimer) -> tuple[np.ndarray, np.ndarray]:
+                y_m: np.ndarray, z1_m: float, backend: Backend, timer: StageTimer) -> tuple[np.ndarray, np.ndarray]:
     """Pass 2 of 2FSK at z1 for the pixels (x_m, y_m) (N,): depth (N,) m and the phasors (2, N)."""
     with timer.stage("correlate"):
-        second = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, z1_m, device)
+        second = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, z1_m, backend)
     with timer.stage("depth"):
         depth_m = z1_m - depth_correction_m(second[0], second[1], *freqs_hz)
     return depth_m, second
 
 
 def two_pass_depth_m(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray,
-                     y_m: np.ndarray, prior_m: float, device: str, timer: StageTimer
+                     y_m: np.ndarray, prior_m: float, backend: Backend, timer: StageTimer
                      ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Two-pass 2FSK over pixels (x_m, y_m) from a scalar prior: depth (N,) m, final phasors (2, N), details.
 
     `signal` (n_rx, n_tx, 2) holds the frequencies `freqs_hz` (f_lo < f_hi).
     """
-    z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_m, y_m, prior_m, device, timer)
-    depth_m, second = second_pass(signal, freqs_hz, antennas, x_m, y_m, z1_m, device, timer)
+    z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_m, y_m, prior_m, backend, timer)
+    depth_m, second = second_pass(signal, freqs_hz, antennas, x_m, y_m, z1_m, backend, timer)
     return depth_m, second, details
 
 
@@ -106,12 +108,14 @@ def finish(depth_m: np.ndarray, magnitude: np.ndarray, grid: RadarGrid, freqs_hz
 
 def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                     device: str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE) -> Reconstruction:
+                     backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE
+                     ) -> Reconstruction:
     """2FSK depth map on `grid`'s pixels from a two-frequency frame `signal` (n_rx, n_tx, 2); `roi` (None = the
     whole grid) and `skips.fsk_keep` as in the module doc."""
     if len(freqs_hz) != 2:
         raise ValueError(f"2FSK needs exactly two frequencies, got {len(freqs_hz)}")
     timer = StageTimer()
+    backend = backend_for(backend)
     roi = roi if roi is not None else full_roi(grid)
     x_img, y_img = grid.pixel_xy_m()
     pixels = roi.pixels
@@ -119,11 +123,11 @@ def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
         nan = np.full(grid.image_shape, np.nan)
         return finish(nan, nan.copy(), grid, freqs_hz, "2fsk", threshold_db, timer,
                       {"prior_m": prior_m, "roi_px": 0, "roi_sources": roi.sources}, roi)
-    z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_img[pixels], y_img[pixels], prior_m, device,
+    z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_img[pixels], y_img[pixels], prior_m, backend,
                                     timer)
 
     def run(mask: np.ndarray) -> dict[str, np.ndarray]:
-        depth_m, phasors = second_pass(signal, freqs_hz, antennas, x_img[mask], y_img[mask], z1_m, device, timer)
+        depth_m, phasors = second_pass(signal, freqs_hz, antennas, x_img[mask], y_img[mask], z1_m, backend, timer)
         with timer.stage("filter"):
             return {"depth_m": depth_m, "magnitude": mean_phasor_magnitude(phasors)}
 

@@ -31,6 +31,7 @@ import numpy as np
 
 from bench.antennas import AntennaArray
 from bench.capture import RadarGrid
+from methods.backend import Backend, backend_for
 from methods.correlate import C_M_PER_S
 from methods.filtering import DEFAULT_THRESHOLD_DB
 from methods.fsk import (DEFAULT_PRIOR_M, correlate_pixels, finish, first_pass_z1_m, mean_phasor_magnitude,
@@ -56,13 +57,15 @@ def slope_correction_m(phasors: np.ndarray, freqs_hz: np.ndarray) -> np.ndarray:
 
 def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                     device: str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE) -> Reconstruction:
+                     backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE
+                     ) -> Reconstruction:
     """3FSK depth map on `grid`'s pixels from a three-frequency frame `signal` (n_rx, n_tx, 3), f ascending;
     `roi` (None = the whole grid) and `skips.fsk_keep` as in the module doc."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     if len(freqs_hz) != 3 or not np.all(np.diff(freqs_hz) > 0):
         raise ValueError(f"3FSK needs three ascending frequencies, got {freqs_hz}")
     timer = StageTimer()
+    backend = backend_for(backend)
     roi = roi if roi is not None else full_roi(grid)
     x_img, y_img = grid.pixel_xy_m()
     pixels = roi.pixels
@@ -75,13 +78,13 @@ def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
                       {**extra, "coarse_depth_m": nan.copy(), "roi_px": 0, "roi_sources": roi.sources}, roi)
     coarse_signal, coarse_hz = signal[:, :, coarse], freqs_hz[coarse]
     z1_m, details = first_pass_z1_m(coarse_signal, coarse_hz, antennas, x_img[pixels], y_img[pixels], prior_m,
-                                    device, timer)
+                                    backend, timer)
 
     def run(mask: np.ndarray) -> dict[str, np.ndarray]:
         x_m, y_m = x_img[mask], y_img[mask]
-        coarse_m, _ = second_pass(coarse_signal, coarse_hz, antennas, x_m, y_m, z1_m, device, timer)
+        coarse_m, _ = second_pass(coarse_signal, coarse_hz, antennas, x_m, y_m, z1_m, backend, timer)
         with timer.stage("correlate"):
-            phasors = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, coarse_m, device)
+            phasors = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, coarse_m, backend)
         with timer.stage("depth"):
             depth_m = coarse_m - slope_correction_m(phasors, freqs_hz)
         with timer.stage("filter"):

@@ -14,45 +14,52 @@ import numpy as np
 
 from bench.antennas import AntennaArray
 from bench.capture import RadarGrid
+from methods.backend import Backend, backend_for
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
 from methods.fsk import correlate_pixels, depth_correction_m, mean_phasor_magnitude, roi_depth_m
+from methods.prior_image import HostPrior, Prior
 from methods.reconstruction import Reconstruction
 from methods.roi import Roi
 from methods.timing import StageTimer
 
 
 def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid,
-                       prior_depth_m: np.ndarray, *, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                       device: str = "cpu", timer: StageTimer | None = None, roi: Roi | None = None
+                       prior: Prior | np.ndarray, *, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
+                       backend: Backend | str = "cpu", timer: StageTimer | None = None, roi: Roi | None = None
                        ) -> Reconstruction:
-    """MM-2FSK depth map (ny, nx) from a two-frequency `signal` (n_rx, n_tx, 2) and a prior (ny, nx), metres.
+    """MM-2FSK depth map (ny, nx) from a two-frequency `signal` (n_rx, n_tx, 2) and a prior (ny, nx) on `grid`
+    (a `Prior` or an image in metres, NaN = no prior), metres.
 
     Pass the `timer` that already timed the prior so that `total` includes it. `roi` (None = the whole grid)
-    bounds the pixels correlated and the depths kept.
+    bounds the pixels correlated and the depths kept. A device-resident prior stays on its backend's device unless
+    the ROI cuts pixels (the host path restricts them).
     """
     if len(freqs_hz) != 2:
         raise ValueError(f"MM-2FSK needs exactly two frequencies, got {len(freqs_hz)}")
-    if prior_depth_m.shape != grid.image_shape:
-        raise ValueError(f"prior shape {prior_depth_m.shape} does not match the radar image {grid.image_shape}")
+    if not isinstance(prior, Prior):
+        prior = HostPrior(np.asarray(prior, dtype=np.float64), grid)
+    if prior.shape != grid.image_shape:
+        raise ValueError(f"prior shape {prior.shape} does not match the radar image {grid.image_shape}")
+    backend = backend_for(backend)
     if roi is not None and roi.pixels.all() and np.isinf(roi.z_min_m) and np.isinf(roi.z_max_m):
         roi = None                                   # the whole grid: nothing to restrict
-    if hasattr(prior_depth_m, "n_covered") and roi is not None and not roi.pixels.all():
-        prior_depth_m = np.asarray(prior_depth_m)    # a GPU prior with a lateral ROI: the host path restricts it
-    if hasattr(prior_depth_m, "n_covered"):          # a GPU prior (methods.prior_warp): the frame stays there
-        from methods.prior_warp import reconstruct_mm2fsk_device
-        result = reconstruct_mm2fsk_device(signal, freqs_hz, antennas, grid, prior_depth_m,
-                                           threshold_db=threshold_db, timer=timer)
-        if roi is not None:                          # a depth interval only: drop depths outside it
-            result.depth_m = roi_depth_m(result.depth_m, roi)
-        result.extra.update(roi_px=result.extra.get("prior_pixels"),
-                            roi_sources=(() if roi is None else roi.sources) + ("prior",))
-        return result
     timer = timer or StageTimer()
+    sources = (() if roi is None else roi.sources) + ("prior",)
+    if prior.device_resident and (roi is None or roi.pixels.all()):
+        depth_m, magnitude, prior_m = backend.depth_at_prior(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid,
+                                                             prior, threshold_db, timer)
+        if roi is not None:                          # a depth interval only: drop depths outside it
+            depth_m = roi_depth_m(depth_m, roi)
+        return Reconstruction(depth_m=depth_m, magnitude=magnitude, freqs_hz=np.asarray(freqs_hz),
+                              timings_ms=timer.finish(), grid=grid, method="mm2fsk",
+                              extra={"prior_depth_m": prior_m, "prior_pixels": prior.n_covered,
+                                     "roi_px": prior.n_covered, "roi_sources": sources})
+    prior_depth_m = prior.host_m()
     has_prior = np.isfinite(prior_depth_m) if roi is None else np.isfinite(prior_depth_m) & roi.pixels
     x_m, y_m = grid.pixel_xy_m()
     prior_m = prior_depth_m[has_prior]
     with timer.stage("correlate"):
-        phasors = correlate_pixels(signal, freqs_hz, antennas, x_m[has_prior], y_m[has_prior], prior_m, device)
+        phasors = correlate_pixels(signal, freqs_hz, antennas, x_m[has_prior], y_m[has_prior], prior_m, backend)
     with timer.stage("depth"):
         depth_m = np.full(grid.image_shape, np.nan)
         depth_m[has_prior] = prior_m - depth_correction_m(phasors[0], phasors[1], *freqs_hz)
@@ -65,5 +72,4 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
     return Reconstruction(depth_m=depth_m, magnitude=magnitude, freqs_hz=np.asarray(freqs_hz),
                           timings_ms=timer.finish(), grid=grid, method="mm2fsk",
                           extra={"prior_depth_m": prior_depth_m, "prior_pixels": int(has_prior.sum()),
-                                 "roi_px": int(has_prior.sum()),
-                                 "roi_sources": (() if roi is None else roi.sources) + ("prior",)})
+                                 "roi_px": int(has_prior.sum()), "roi_sources": sources})

@@ -65,13 +65,13 @@ def plan(freqs_hz: np.ndarray, oversampling: int = OVERSAMPLING) -> RangePlan | 
     return RangePlan(index, float(df_hz), float(f0 + n_centre * df_hz), n_centre, n_samples)
 
 
-def worth_it(freqs_hz: np.ndarray, device: str) -> bool:
-    """Choice of `correlate_volume(method="auto")`: range compression on Warp devices with many frequencies.
+def worth_it(freqs_hz: np.ndarray) -> bool:
+    """The Warp backend's choice for a volume with method "auto": range compression with many frequencies.
 
-    `correlate_volume` on the numpy CPU path keeps the per-frequency BLAS sum; BP's depth search on the CPU uses
-    the numpy range-compressed gather of `methods.range_cpu` instead (measured faster there, notes/gpu.md).
+    The numpy backend keeps the per-frequency BLAS sum for volumes; BP's depth search on the CPU uses the numpy
+    range-compressed gather of `methods.range_cpu` instead (measured faster there, notes/gpu.md).
     """
-    return device != "cpu" and len(freqs_hz) >= RANGE_MIN_FREQS and plan(freqs_hz) is not None
+    return len(freqs_hz) >= RANGE_MIN_FREQS and plan(freqs_hz) is not None
 
 
 def sample_window(rplan: RangePlan, path_min_m: float, path_max_m: float, margin: int = 2) -> tuple[int, int]:

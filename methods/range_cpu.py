@@ -31,7 +31,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from methods import range_compression
-from methods.backend_numpy import _path_excess_m, _phasor_mod_2pi
+from methods.backend_numpy import path_excess_m as _path_excess_m, phasor_mod_2pi as _phasor_mod_2pi
 
 C_M_PER_S = 299_792_458.0
 OVERSAMPLING = 32          # Q on the CPU (profile samples per frequency-grid bin)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from methods.correlate import resolve_device
+from methods.backend import resolve_device
 
 
 def cuda_seen() -> bool:

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from bench.antennas import load_antenna_array
-from methods.correlate import C_M_PER_S, correlate, correlate_reference, correlate_volume, resolve_device
+from methods.backend import resolve_device
+from methods.correlate import C_M_PER_S, correlate, correlate_reference, correlate_volume
 from methods.range_compression import RANGE_REL_TOL
 from devices import CUDA
 
@@ -60,10 +61,10 @@ def test_correlate_matches_float64_reference(device):
 @pytest.mark.parametrize("kernel", ["tc", "separable"])
 def test_warp_kernels_match_reference(device, kernel):
     """Each Warp kernel by name on both Warp devices (the tensor-core kernel runs its scalar tile path on the CPU)."""
-    from methods.backend_warp import correlate_warp
+    from methods.backend import backend_for
     rng = np.random.default_rng()
     signal, freqs_hz, points_m = random_problem(rng, 70, int(rng.integers(1, 4)))
-    out = correlate_warp(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m, device=device, kernel=kernel)
+    out = backend_for(device).correlate(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m, kernel=kernel)
     ref = correlate_reference(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m)
     assert rel_err(out, ref) < (1e-3 if kernel == "tc" else 1e-4)
 
@@ -83,10 +84,10 @@ def test_frame_cache_sees_in_place_changes_and_outputs_are_not_shared(device):
 
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 def test_plain_direct_kernel_matches_reference(device):
-    from methods.backend_warp import correlate_warp
+    from methods.backend import backend_for
     rng = np.random.default_rng()
     signal, freqs_hz, points_m = random_problem(rng, 30, 2)
-    out = correlate_warp(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m, device=device, kernel="direct")
+    out = backend_for(device).correlate(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m, kernel="direct")
     assert rel_err(out, correlate_reference(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m)) < 1e-3
 
 
@@ -132,9 +133,9 @@ def test_range_compressed_volume_within_stated_bound(device):
 
 def test_auto_method_uses_range_compression_only_where_it_applies():
     from methods.range_compression import worth_it
-    assert worth_it(ALL_FREQS_HZ, "cuda") and not worth_it(ALL_FREQS_HZ, "cpu")
-    assert not worth_it(ALL_FREQS_HZ[[0, 127]], "cuda")      # 2 frequencies: direct
-    assert not worth_it(ALL_FREQS_HZ[::16] + np.r_[0, 1e6, 0, 0, 0, 0, 0, 0], "cuda")  # off-grid
+    assert worth_it(ALL_FREQS_HZ)
+    assert not worth_it(ALL_FREQS_HZ[[0, 127]])      # 2 frequencies: direct
+    assert not worth_it(ALL_FREQS_HZ[::16] + np.r_[0, 1e6, 0, 0, 0, 0, 0, 0])  # off-grid
 
 
 @pytest.mark.parametrize("device", DEVICES)

@@ -1,6 +1,6 @@
 """The device paths of round 3 against their CPU specifications: the Warp-rasterised MM-2FSK prior
-(methods/prior_warp.py vs methods/prior.py), the on-device MM-2FSK depth/filter, and BP's on-device depth
-extraction (backend_warp._peak_kernel vs bp.peak_depth_m).
+(methods/warp_backend/prior.py vs methods/prior.py), the on-device MM-2FSK depth/filter, and BP's on-device depth
+extraction (warp_backend.correlation_kernels.volume_peak_depth vs depth_peak.peak_depth_m).
 
 Each runs on Warp's CPU device ("warp-cpu", small sizes) and on CUDA (marked `cuda`, skipped without a GPU).
 Tolerances: the prior is float64 on both sides, covered sets equal up to `MAX_SILHOUETTE_PX` pixels whose centre lies
@@ -17,7 +17,8 @@ import pytest
 
 from bench.capture import Mesh, RadarGrid
 from methods import reconstruct
-from methods.bp import peak_depth_m
+from methods.backend import backend_for
+from methods.depth_peak import peak_depth_m
 from methods.correlate import correlate_volume
 from methods.prior import mesh_prior_m, realsense_prior_m
 from devices import CUDA
@@ -52,7 +53,7 @@ def _hole_scene():
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("scene", ["plane", "plane_0.1mm", "holes", "bench_frame"])
 def test_realsense_prior_on_the_device_matches_the_cpu_prior(device, scene):
-    from methods.prior_warp import realsense_prior_device
+    from methods.warp_backend.prior import realsense_prior
     grid = square_grid(0.15, 301)
     if scene == "holes":
         frame, cam2radar = _hole_scene()
@@ -63,7 +64,7 @@ def test_realsense_prior_on_the_device_matches_the_cpu_prior(device, scene):
         cam2radar = realsense2radar()
         frame = plane_depth_frame(*PLANE, cam2radar, 1e-4 if scene == "plane_0.1mm" else 1e-3)
     for fill in (False, True):
-        device_prior = realsense_prior_device(frame, cam2radar, grid, fill_holes=fill, device=device)
+        device_prior = realsense_prior(backend_for(device).buffers, frame, cam2radar, grid, fill_holes=fill)
         _compare_priors(device_prior, realsense_prior_m(frame, cam2radar, grid, fill_holes=fill))
         if scene == "holes":
             assert device_prior.filled == fill          # the hull test saw the hole and the notch
@@ -71,13 +72,13 @@ def test_realsense_prior_on_the_device_matches_the_cpu_prior(device, scene):
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_mesh_prior_on_the_device_matches_the_cpu_prior(device):
-    from methods.prior_warp import mesh_prior_device
+    from methods.warp_backend.prior import mesh_prior
     grid = square_grid(0.15, 301)
     vertices = np.array([[-0.05, -0.04, 0.30], [0.05, -0.04, 0.32], [0.05, 0.04, 0.32], [-0.05, 0.04, 0.30],
                          [-0.02, -0.02, 0.25], [0.02, -0.02, 0.25], [0.0, 0.03, 0.26]])
     mesh = Mesh(vertices=vertices * 1000.0, triangles=np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]]), path=Path("m"))
     to_radar = np.diag([1e-3, 1e-3, 1e-3, 1.0])
-    device_prior = mesh_prior_device(mesh, to_radar, grid, device=device)
+    device_prior = mesh_prior(backend_for(device).buffers, mesh, to_radar, grid)
     _compare_priors(device_prior, mesh_prior_m(mesh, to_radar, grid))
     assert np.nanmin(np.asarray(device_prior)) == pytest.approx(0.25)     # the nearer triangle wins
 
@@ -86,7 +87,7 @@ def test_mesh_prior_on_the_device_matches_the_cpu_prior(device):
 def test_device_hull_count_is_the_number_of_lattice_points_in_the_convex_hull(device):
     import warp as wp
     from scipy.spatial import Delaunay
-    from methods import prior_warp
+    from methods.warp_backend.prior import FAR_M, cleared_zbuffer, coverage
     ny, nx = 30, 40
     grid = RadarGrid((0.0, 0.0, 0.2), (1.0, 1.0, 0.3), (nx, ny, 2))
     rng = np.random.default_rng(1)
@@ -98,9 +99,9 @@ def test_device_hull_count_is_the_number_of_lattice_points_in_the_convex_hull(de
         rows, cols = np.nonzero(covered)
         inside = Delaunay(np.column_stack([cols, rows])).find_simplex(np.column_stack([cc.ravel(), rr.ravel()]),
                                                                        tol=1e-9) >= 0
-        dev, zbuf, stats = prior_warp._start(grid, device)
-        zbuf.assign(np.where(covered, 0.3, prior_warp.FAR_M).ravel())
-        assert prior_warp._coverage(zbuf, stats, ny, nx, dev) == (covered.sum(), inside.sum())
+        zbuf, stats = cleared_zbuffer(backend_for(device).buffers, grid)
+        zbuf.assign(np.where(covered, 0.3, FAR_M).ravel())
+        assert coverage(zbuf, stats, ny, nx) == (covered.sum(), inside.sum())
         wp.synchronize()
 
 
@@ -117,7 +118,7 @@ def _tilted_plate(grid):
 def test_mm2fsk_frame_on_the_device_matches_the_cpu_path(device):
     from methods.api import prior_image_m
     from methods.mm2fsk import reconstruct_mm2fsk
-    from methods.prior_warp import realsense_prior_device
+    from methods.warp_backend.prior import realsense_prior
     grid = square_grid(0.03, 61) if device == "cuda" else square_grid(0.02, 21)
     capture = _tilted_plate(grid)
     indices = [0, 6]                                   # 72 and 82 GHz (d10)
@@ -126,11 +127,12 @@ def test_mm2fsk_frame_on_the_device_matches_the_cpu_path(device):
         rec = reconstruct(capture, "mm2fsk", "d10", prior="realsense", device="cuda")
         assert rec.extra["device"] == "cuda"
     else:
-        prior = realsense_prior_device(capture.realsense, capture.transforms["realsense2radar"], grid,
-                                       device=device)
-        rec = reconstruct_mm2fsk(signal, freqs, capture.antennas, grid, prior)
-    cpu_prior = prior_image_m(capture, "realsense", grid)
-    ref = reconstruct_mm2fsk(signal, freqs, capture.antennas, grid, cpu_prior)
+        backend = backend_for(device)
+        prior = realsense_prior(backend.buffers, capture.realsense, capture.transforms["realsense2radar"], grid)
+        rec = reconstruct_mm2fsk(signal, freqs, capture.antennas, grid, prior, backend=backend)
+    host_prior = prior_image_m(capture, "realsense", grid)
+    cpu_prior = host_prior.host_m()
+    ref = reconstruct_mm2fsk(signal, freqs, capture.antennas, grid, host_prior, backend=backend_for("cpu"))
     assert np.array_equal(np.isfinite(rec.extra["prior_depth_m"]), np.isfinite(cpu_prior))
     assert np.nanmax(np.abs(rec.extra["prior_depth_m"] - cpu_prior)) < 1e-9
     assert rec.extra["prior_pixels"] == ref.extra["prior_pixels"]

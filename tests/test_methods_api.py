@@ -92,15 +92,21 @@ def test_warp_devices_give_the_cpu_result(tilted_plate, device, method, config, 
     np.testing.assert_allclose(on_device.depth_m, on_cpu.depth_m, rtol=0, atol=2e-6)
 
 
-def test_warm_up_runs_once_per_device_method_and_frequency_count(tilted_plate, monkeypatch):
-    from methods import api
-    calls = []
-    monkeypatch.setattr(api, "_warmed_up", set())
-    monkeypatch.setattr(api, "correlate", lambda *args, **kwargs: calls.append("correlate"))
+def test_warm_up_runs_once_per_backend_and_frequency_count(tilted_plate, monkeypatch):
+    from methods.backend import backend_for
+    backend = backend_for("warp-cpu")
+    calls, correlate = [], backend.correlate
+
+    def counting(signal, freqs_hz, tx_m, rx_m, points_m, **kwargs):
+        if np.array_equal(points_m, [[0.0, 0.0, 0.3]]):          # the warm-up's tiny problem
+            calls.append(len(freqs_hz))
+        return correlate(signal, freqs_hz, tx_m, rx_m, points_m, **kwargs)
+    monkeypatch.setattr(backend, "warmed", set())
+    monkeypatch.setattr(backend, "correlate", counting)
     grid = square_grid(0.003, 7, 0.29, 0.31, 11)
     for _ in range(3):
         reconstruct(tilted_plate, "3fsk", "d05_d10", prior=0.3, grid=grid, device="warp-cpu")
-    assert calls == ["correlate"]                       # the later calls skip the warm-up
+    assert calls == [3]                                 # the later calls skip the warm-up
     reconstruct(tilted_plate, "2fsk", "d05", prior=0.3, grid=grid, device="warp-cpu")
-    assert calls == ["correlate"] * 2                   # another method (and frequency count): its own warm-up
-    assert api._warmed_up == {("warp-cpu", "3fsk", 3), ("warp-cpu", "2fsk", 2)}
+    assert calls == [3, 2]                              # another frequency count: its own warm-up
+    assert backend.warmed == {(3, False, False), (2, False, False)}

@@ -14,7 +14,8 @@ import numpy as np
 
 from bench.stress.scenes import (MAROON_FREQS_HZ, TABLE1_CONFIGS, THREE_FREQ_CONFIGS, antennas, frame,
                                  pixel_grid, plate_points_m)
-from methods.correlate import correlate, correlate_reference, resolve_device
+from methods.backend import resolve_device
+from methods.correlate import correlate, correlate_reference
 from methods.filtering import keep_mask
 from methods.frequencies import config_indices
 from methods.fsk import depth_correction_m

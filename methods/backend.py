@@ -1,0 +1,139 @@
+"""The correlation backend a method runs on, resolved once from the `device` option (DESIGN.md section 5).
+
+`backend_for(device)` gives a process-wide `Backend`: `NumpyBackend` ("cpu": complex64 steering vectors and
+float32 BLAS, methods.backend_numpy) or `WarpBackend` ("cuda", "warp-cpu": methods.warp_backend, owning its
+device, frame cache and buffer pool). Methods talk to the backend only; no device name is compared below this
+module. A backend offers:
+
+* `correlate(signal, freqs_hz, tx_m, rx_m, points_m)` -> complex64 (F, N) back-projection phasors at points, and
+  `correlate_summed(...)` -> (N,) summed over frequencies where the data lives;
+* `volume(...)` -> complex64 (nz, ny, nx) frequency-summed on a grid, and `volume_peak(...)` -> BP's (depth, max
+  projection) maps with the volume kept where it was computed;
+* `realsense_prior(...)` / `mesh_prior(...)` -> a `methods.prior_image.Prior`, on the device when asked and
+  possible, and `depth_at_prior(...)` for a device-resident one;
+* `warm_up(...)`: compile what a timed run will need.
+
+C[f, p] = sum_{r,t} S[r,t,f] exp(+j 2 pi f (|p - rx_r| + |p - tx_t|) / c) / (n_rx n_tx); `methods.correlate`
+holds the float64 reference every backend is tested against.
+"""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from bench.capture import DepthFrame, Mesh, RadarGrid
+from methods.prior import mesh_prior_m, realsense_prior_m
+from methods.prior_image import HostPrior, Prior
+
+DEVICES = ("cpu", "cuda", "auto", "warp-cpu")
+
+
+class DeviceUnavailableError(RuntimeError):
+    """A device was asked for that this machine cannot run (e.g. "cuda" where Warp sees no GPU).
+
+    Command lines turn it into one line naming their own option (bench.cli.resolve_device)."""
+
+    def __init__(self, device: str, problem: str):
+        self.device, self.problem = device, problem
+        super().__init__(f"device={device!r} was asked for, but {problem}")
+
+
+def resolve_device(device: str) -> str:
+    """Map a requested device to the one used: "cpu" (numpy + BLAS), "cuda" (Warp), "warp-cpu" (Warp on the CPU).
+
+    "auto" gives "cuda" when Warp sees a CUDA device, else "cpu". "cuda" without a CUDA device raises
+    DeviceUnavailableError (a RuntimeError); an unknown name raises ValueError.
+    """
+    if device not in DEVICES:
+        raise ValueError(f"device must be one of {DEVICES}, got {device!r}")
+    if device == "cpu" or device == "warp-cpu":
+        return device
+    from methods.warp_backend.runtime import cuda_available  # Warp is imported only when a Warp device is asked for
+    has_cuda = cuda_available()
+    if device == "auto":
+        return "cuda" if has_cuda else "cpu"
+    if not has_cuda:
+        raise DeviceUnavailableError(device, "Warp sees no CUDA device")
+    return "cuda"
+
+
+def backend_for(device: str) -> Backend:
+    """The process-wide backend of a device name (resolved with `resolve_device`; a `Backend` passes through)."""
+    if isinstance(device, Backend):
+        return device
+    return _backend(resolve_device(device))
+
+
+@functools.cache
+def _backend(name: str) -> Backend:
+    if name == "cpu":
+        from methods.backend_numpy import NumpyBackend
+        return NumpyBackend()
+    from methods.warp_backend.backend import WarpBackend
+    return WarpBackend(name)
+
+
+def check_inputs(signal, freqs_hz, tx_m, rx_m):
+    """Validated (signal complex64 or complex128 (n_rx, n_tx, F), freqs_hz float64 (F,), tx_m, rx_m float64 (., 3))."""
+    signal = np.asarray(signal)
+    freqs_hz = np.atleast_1d(np.asarray(freqs_hz, dtype=np.float64))
+    tx_m = np.asarray(tx_m, dtype=np.float64).reshape(-1, 3)
+    rx_m = np.asarray(rx_m, dtype=np.float64).reshape(-1, 3)
+    if signal.ndim == 2 and len(freqs_hz) == 1:
+        signal = signal[:, :, None]
+    if signal.shape != (len(rx_m), len(tx_m), len(freqs_hz)):
+        raise ValueError(f"signal must have shape (n_rx, n_tx, F) = ({len(rx_m)}, {len(tx_m)}, {len(freqs_hz)}), "
+                         f"got {signal.shape}")
+    return signal.astype(np.complex64 if signal.dtype != np.complex128 else np.complex128), freqs_hz, tx_m, rx_m
+
+
+def grid_vectors(x_m, y_m, z_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The three coordinate vectors of a grid as float64 (n,) arrays."""
+    return tuple(np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (x_m, y_m, z_m))
+
+
+class Backend:
+    """What every backend offers (module doc). `name` is the device recorded in results rows."""
+
+    name: str
+    #: BP's CPU range-compressed depth search (methods.range_cpu) is this backend's fast path for many frequencies
+    host_range_search = False
+    #: BP over a region of interest computes the rectangular volume of its bounding box (else the point search)
+    prefers_box_volume = False
+
+    def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m) -> np.ndarray:
+        """complex64 (F, N) phasors at points_m (N, 3), radar space, metres."""
+        raise NotImplementedError
+
+    def correlate_summed(self, signal, freqs_hz, tx_m, rx_m, points_m) -> np.ndarray:
+        """complex64 (N,) phasors summed over frequencies."""
+        raise NotImplementedError
+
+    def volume(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, method: str = "auto") -> np.ndarray:
+        """complex64 (nz, ny, nx) frequency-summed phasors on the grid (axes in the order the vectors are given)."""
+        raise NotImplementedError
+
+    def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """BP's (depth_m, max projection), each float64 (ny, nx), over z_m (equidistant, step dz_m); `timer` gets
+        the stages "correlate" and "depth"."""
+        raise NotImplementedError
+
+    def realsense_prior(self, depth: DepthFrame, realsense2radar: np.ndarray, grid: RadarGrid,
+                        keep_on_device: bool = False) -> Prior:
+        """`methods.prior.realsense_prior_m` as a Prior (on the device with `keep_on_device` where possible)."""
+        return HostPrior(realsense_prior_m(depth, realsense2radar, grid), grid)
+
+    def mesh_prior(self, mesh: Mesh, photogrammetry2radar: np.ndarray, grid: RadarGrid,
+                   keep_on_device: bool = False) -> Prior:
+        """`methods.prior.mesh_prior_m` as a Prior (on the device with `keep_on_device` where possible)."""
+        return HostPrior(mesh_prior_m(mesh, photogrammetry2radar, grid), grid)
+
+    def depth_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, prior: Prior,
+                       threshold_db: float | None, timer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Two-frequency depth at a device-resident prior, where it lives: (depth_m, magnitude, prior_m) (ny, nx)."""
+        raise NotImplementedError(f"{type(self).__name__} holds no device-resident priors")
+
+    def warm_up(self, signal, freqs_hz, tx_m, rx_m, *, volume: bool, prior: bool) -> None:
+        """Compile what a timed run will need (nothing to compile on the numpy backend)."""

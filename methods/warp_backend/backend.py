@@ -1,0 +1,117 @@
+"""`WarpBackend`: the backend of the Warp devices ("cuda", "warp-cpu"), owning its device, frame cache and buffer
+pool (methods.backend describes what a backend offers)."""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from methods import range_compression
+from methods.backend import Backend, check_inputs, grid_vectors
+from methods.filtering import DEFAULT_THRESHOLD_DB
+from methods.prior_image import Prior
+from methods.timing import StageTimer
+from methods.warp_backend import correlation, fsk, prior
+from methods.warp_backend.frames import BufferPool, FrameCache
+from methods.warp_backend.runtime import init
+
+
+class WarpBackend(Backend):
+    """Warp kernels on one device. `name` "cuda" (the first CUDA device: tensor-core correlation, priors rasterised
+    on the device) or "warp-cpu" (Warp's single-threaded CPU device: the fp32 separable kernel, host priors; the
+    tests' reference for the kernels without a GPU)."""
+
+    prefers_box_volume = True
+
+    def __init__(self, name: str):
+        init()
+        self.name = name
+        self.device = wp.get_device("cpu" if name == "warp-cpu" else "cuda:0")
+        self.frames = FrameCache(self.device.alias)
+        self.buffers = BufferPool(self.device.alias)
+        # tensor cores on CUDA; Warp-CPU runs tiles with block_dim 1, where the fp32 separable kernel is faster
+        self.default_kernel = "separable" if self.device.is_cpu else "tc"
+        self.rasterises_prior = not self.device.is_cpu
+        self.warmed: set = set()
+
+    def make_launch(self, signal, freqs_hz, tx_m, rx_m, *, kernel: str | None = None, points_m=None, grid_m=None,
+                    sum_freqs: bool = False, reuse: bool = False):
+        """`correlation.make_launch` on this device (the benchmarks time the function it returns)."""
+        return correlation.make_launch(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m,
+                                       kernel=kernel or self.default_kernel, points_m=points_m, grid_m=grid_m,
+                                       sum_freqs=sum_freqs, reuse=reuse)
+
+    def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel: str | None = None) -> np.ndarray:
+        """complex64 (F, N); `kernel` "tc", "separable" or "direct" (None: the device's default)."""
+        return self._points(signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs=False)
+
+    def correlate_summed(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel: str | None = None) -> np.ndarray:
+        """complex64 (N,), the frequency sum taken on the device."""
+        return self._points(signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs=True)[0]
+
+    def _points(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs):
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+        run = self.make_launch(signal, freqs_hz, tx_m, rx_m, kernel=kernel, points_m=points_m, sum_freqs=sum_freqs,
+                               reuse=True)
+        return correlation.to_complex(run())
+
+    def _volume_kernel(self, freqs_hz, method: str) -> str:
+        if method not in ("auto", "direct", "range"):
+            raise ValueError(f"method must be 'auto', 'direct' or 'range', got {method!r}")
+        if method == "auto":
+            method = "range" if range_compression.worth_it(freqs_hz) else "direct"
+        return "range" if method == "range" else self.default_kernel
+
+    def volume(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, method: str = "auto", kernel: str | None = None
+               ) -> np.ndarray:
+        """As `Backend.volume`; `kernel` names a Warp kernel directly (tests, benchmarks)."""
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        x_m, y_m, z_m = grid_vectors(x_m, y_m, z_m)
+        kernel = kernel or self._volume_kernel(freqs_hz, method)
+        run = self.make_launch(signal, freqs_hz, tx_m, rx_m, kernel=kernel, grid_m=(x_m, y_m, z_m), reuse=True)
+        return correlation.to_complex(run())[0].reshape(len(z_m), len(y_m), len(x_m))
+
+    def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None):
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        x_m, y_m, z_m = grid_vectors(x_m, y_m, z_m)
+        return correlation.volume_peak(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m,
+                                       kernel=self._volume_kernel(freqs_hz, "auto"), timer=timer)
+
+    def realsense_prior(self, depth, realsense2radar, grid, keep_on_device: bool = False) -> Prior:
+        if keep_on_device and self.rasterises_prior:
+            return prior.realsense_prior(self.buffers, depth, realsense2radar, grid)
+        return super().realsense_prior(depth, realsense2radar, grid)
+
+    def mesh_prior(self, mesh, photogrammetry2radar, grid, keep_on_device: bool = False) -> Prior:
+        if keep_on_device and self.rasterises_prior:
+            return prior.mesh_prior(self.buffers, mesh, photogrammetry2radar, grid)
+        return super().mesh_prior(mesh, photogrammetry2radar, grid)
+
+    def depth_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid, prior: Prior,
+                       threshold_db: float | None = DEFAULT_THRESHOLD_DB, timer=None):
+        if not prior.device_resident:
+            raise ValueError("depth_at_prior needs a prior held on this backend's device")
+        if threshold_db is not None and threshold_db < 0:
+            raise ValueError(f"threshold_db is dB below the maximum and must be >= 0, got {threshold_db}")
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        keep_ratio = 0.0 if threshold_db is None else float(10.0 ** (-threshold_db / 20.0))
+
+        def correlate_points(points):
+            return self.make_launch(signal, freqs_hz, tx_m, rx_m, points_m=points, reuse=True)()
+        return fsk.depth_at_prior(self.buffers, correlate_points, signal, freqs_hz, grid, prior, keep_ratio,
+                                  timer or StageTimer())
+
+    def warm_up(self, signal, freqs_hz, tx_m, rx_m, *, volume: bool, prior: bool) -> None:
+        """Compile this device's kernels on a tiny problem, once per (number of frequencies, volume, prior):
+        later calls return at once (a per-call warm-up cost ~48 ms per BP_max call and 1-3 ms per other call)."""
+        key = (len(freqs_hz), volume, prior)
+        if key in self.warmed:
+            return
+        self.correlate(signal, freqs_hz, tx_m, rx_m, np.array([[0.0, 0.0, 0.3]]))
+        if volume:
+            self.volume(signal, freqs_hz, tx_m, rx_m, [0.0], [0.0], [0.3, 0.301])
+        if prior and self.rasterises_prior:
+            from methods.warp_backend import fsk_kernels, prior_kernels
+            for module in (prior_kernels, fsk_kernels):
+                wp.load_module(module=module.__name__, device=self.device)
+        self.warmed.add(key)
