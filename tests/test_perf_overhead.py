@@ -1,0 +1,17 @@
+"""Sweep overhead (issue 13 item 5): captures read once and ground truth built once per process, the rest timed."""
+from __future__ import annotations
+
+from bench.perf_overhead import STAGES, measure
+
+
+def test_later_cells_reuse_the_read_captures_and_ground_truth(synth_root, tmp_path):
+    rows = measure(synth_root, ["mm2fsk_d10", "mm2fsk_d05"], ["01_plate/30"], "cpu", None, use_store=True,
+                   work=tmp_path)
+    first, second, total = rows
+    assert first["read_s"] > 0 and first["ground_truth_s"] > 0 and first["frames"] == 1
+    assert second["read_s"] == 0 and second["ground_truth_s"] == 0         # served from the process's caches
+    for row in (first, second):
+        assert row["method_s"] >= row["method_warm_s"] > 0 and row["store_key_s"] > 0 and row["outputs_s"] > 0
+        assert abs(sum(row[f"{s}_s"] for s in STAGES) + row["other_s"] - row["wall_s"]) < 1e-9
+        assert 0 <= row["other_s"] < 0.5 * row["wall_s"]
+    assert total["cell"] == "total" and total["frames"] == 2
