@@ -1,7 +1,8 @@
 """Shared fixtures: small synthetic MAROON-format captures built once per test session.
 
 * `synth_root`: a dataset root holding `01_plate/30` and `03_sphere/30` generated with the default
-  `SynthConfig` (128 frequencies, clutter, noise; about 10 s on 2 cores, once per session).
+  `SynthConfig` (the `ideal` preset: 128 frequencies, clutter, noise; about 10 s on 2 cores, once per session).
+* `results_root`: the same captures with the preset of the committed results (`realistic`; ~30 s, regression only).
 * `synth_capture(object_name, distance_cm, **config_overrides) -> Path`: one custom capture, cached per
   configuration for the whole session (e.g. `frequency_points=16` for a fast capture, `depth_noise=False`).
 """
@@ -23,6 +24,19 @@ def synth_root(tmp_path_factory):
     root = tmp_path_factory.mktemp("synth_default")
     for object_name, distance_cm in SYNTH_FIXTURE_CAPTURES:
         generate_capture(root, object_name, distance_cm)
+    return root
+
+
+@pytest.fixture(scope="session")
+def results_root(tmp_path_factory):
+    """Dataset root with SYNTH_FIXTURE_CAPTURES generated with the preset of the committed results (the demo's
+    default, bench.synth.config.DEFAULT_PRESET): what tests/test_regression.py compares with results/."""
+    from bench.synth import generate_capture
+    from bench.synth.config import DEFAULT_PRESET, preset
+
+    root = tmp_path_factory.mktemp("synth_results")
+    for object_name, distance_cm in SYNTH_FIXTURE_CAPTURES:
+        generate_capture(root, object_name, distance_cm, preset(DEFAULT_PRESET))
     return root
 
 

@@ -1,5 +1,6 @@
 """Regression on metric values: a subset of the committed synthetic benchmark (results/<table>/results.csv) is
-recomputed on the test fixture's captures (the same generator, config and seeds as the benchmark's) and compared.
+recomputed on the test fixture's captures (the same generator, preset, config and seeds as the benchmark's:
+`results_root`) and compared.
 
 Tolerance per metric: |new - baseline| <= max(0.05 cm, 10 % of the baseline). BLAS and libm differ in the last
 bits across machines; that moves phases by ~1e-6 rad, which can flip a pixel at the edge of the dB filter, the
@@ -24,9 +25,9 @@ CASES = [("table2", ["method=mm2fsk", "freq=d05", "prior=photogrammetry"]), ("ta
 
 
 @pytest.mark.parametrize("table, overrides", CASES, ids=[" ".join(o) for _, o in CASES])
-def test_metrics_match_the_committed_baseline(synth_root, tmp_path, table, overrides):
+def test_metrics_match_the_committed_baseline(results_root, tmp_path, table, overrides):
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose(config_name="config", overrides=["dataset=maroon", f"dataset.root={synth_root}",
+        cfg = compose(config_name="config", overrides=["dataset=maroon", f"dataset.root={results_root}",
                                                       "store.dir=null", *overrides])
     new = pd.DataFrame(run(cfg, tmp_path)).set_index("object")
     baseline = pd.read_csv(RESULTS_DIR / table / "results.csv")
