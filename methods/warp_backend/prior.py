@@ -4,9 +4,10 @@ specification, reproduced step by step in float64.
 Hull fill (`raster.fill_convex_hull`): the device counts the covered pixels, each row's first/last covered column,
 and, exactly in integer arithmetic, the lattice points of the convex hull of the covered pixels. The fill can add
 pixels only if the hull holds more lattice points than are covered (it fills exactly those inside the hull); only
-then is the z-buffer copied back, filled with the CPU function itself (exact; ~5-10 ms for a masked object with
-holes or notches) and uploaded again. One 8-byte copy back decides. A prior with nothing to fill (e.g. a surface
-that covers the whole radar grid) never leaves the GPU.
+then does `hull_fill.fill_hull` run: the rim pixels are found on the device, their indices (not the z-buffer) come
+to the host for scipy's Delaunay triangulation, and its triangles are rasterised into the empty pixels on the
+device (exact). One 8-byte copy back decides. A prior with nothing to fill (e.g. a surface that covers the whole
+radar grid) never leaves the GPU.
 """
 from __future__ import annotations
 
@@ -16,9 +17,10 @@ import warp as wp
 from bench.alignment import apply_transform
 from bench.capture import DepthFrame, Mesh, RadarGrid
 from methods.prior_image import Prior
-from methods.raster import fill_convex_hull
+from methods.prior import DEFAULT_MAX_JUMP_MM
 from methods.warp_backend import prior_kernels as kernels
 from methods.warp_backend.frames import BufferPool
+from methods.warp_backend.hull_fill import fill_hull
 
 FAR_M = 1.0e300                  # z-buffer value of an uncovered pixel (prior_kernels.FAR)
 
@@ -59,17 +61,13 @@ def coverage(zbuf, stats, ny: int, nx: int, hull: bool = True) -> tuple[int, int
     return n_covered, n_hull
 
 
-def _finish(zbuf, stats, grid, fill_holes: bool) -> DevicePrior:
+def _finish(buffers: BufferPool, zbuf, stats, grid, fill_holes: bool) -> DevicePrior:
     ny, nx = grid.image_shape
     n_covered, n_hull = coverage(zbuf, stats, ny, nx, hull=fill_holes)
     filled = False
     if fill_holes and 0 < n_covered < ny * nx and n_hull > n_covered:
-        image = zbuf.numpy().reshape(ny, nx).copy()
-        image[image >= FAR_M] = np.nan
-        image = fill_convex_hull(image)
-        covered = np.isfinite(image)
-        n_covered, filled = int(covered.sum()), True
-        zbuf.assign(np.where(covered, image, FAR_M).ravel())
+        n_covered += fill_hull(buffers, zbuf, ny, nx)
+        filled = True
     return DevicePrior(zbuf, grid, n_covered, filled)
 
 
@@ -84,8 +82,8 @@ def cleared_zbuffer(buffers: BufferPool, grid: RadarGrid):
 
 
 def realsense_prior(buffers: BufferPool, depth: DepthFrame, realsense2radar: np.ndarray, grid: RadarGrid,
-                    fill_holes: bool = True) -> DevicePrior:
-    """`prior.realsense_prior_m` on the pool's Warp device."""
+                    fill_holes: bool = True, max_jump_mm: float | None = DEFAULT_MAX_JUMP_MM) -> DevicePrior:
+    """`prior.realsense_prior_m` on the pool's Warp device (max_jump_mm: the depth-jump rule, None = off)."""
     zbuf, stats = cleared_zbuffer(buffers, grid)
     dev = buffers.wp_device
     height, width = depth.depth_mm.shape
@@ -101,8 +99,9 @@ def realsense_prior(buffers: BufferPool, depth: DepthFrame, realsense2radar: np.
     ny, nx = grid.image_shape
     xf = wp.mat44d(*np.asarray(realsense2radar, dtype=np.float64).ravel())
     wp.launch(kernels.raster_camera_quads, dim=(height - 1) * (width - 1),
-              inputs=[d_img, m_img, int(depth.mask is not None), cam, xf, ny, nx, zbuf], device=dev)
-    return _finish(zbuf, stats, grid, fill_holes)
+              inputs=[d_img, m_img, int(depth.mask is not None), cam, xf,
+                      wp.float64(-1.0 if max_jump_mm is None else max_jump_mm), ny, nx, zbuf], device=dev)
+    return _finish(buffers, zbuf, stats, grid, fill_holes)
 
 
 def mesh_prior(buffers: BufferPool, mesh: Mesh, photogrammetry2radar: np.ndarray, grid: RadarGrid,
@@ -119,4 +118,4 @@ def mesh_prior(buffers: BufferPool, mesh: Mesh, photogrammetry2radar: np.ndarray
         wp.launch(kernels.raster_mesh_triangles, dim=len(tris),
                   inputs=[wp.array(verts, dtype=wp.vec3d, device=dev), wp.array(tris, dtype=wp.vec3i, device=dev),
                           ny, nx, zbuf], device=dev)
-    return _finish(zbuf, stats, grid, fill_holes)
+    return _finish(buffers, zbuf, stats, grid, fill_holes)

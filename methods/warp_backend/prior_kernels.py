@@ -4,7 +4,8 @@
 * `raster_camera_quads`: one thread per 2x2 quad of the depth image. Its four corners are back-projected with the
   intrinsics (paper eq. 9, same float64 expressions as `prior.backproject_mm`), mapped with realsense2radar
   (`apply_transform`'s order of operations) onto continuous radar pixel coordinates, and the quad's triangles are
-  formed exactly as `prior.grid_triangles` does (2 triangles, or 1 for three valid corners). The quad culling of
+  formed exactly as `prior.grid_triangles` does (rule 'sound' with the depth-jump rule: 2 triangles, or 1 for
+  three valid corners, each only where its camera depths jump by <= max_jump_mm). The quad culling of
   `prior.quads_around_centres` is not needed: it only drops triangles that cover no pixel centre.
 * `raster_triangle`: the scanline rasteriser of `raster.rasterize_nearest_z` for one triangle (same row range, edge
   crossings, inclusive 1e-9 px epsilon, plane evaluation), nearest z kept with a float64 `atomic_min` z-buffer.
@@ -103,10 +104,26 @@ def raster_corners(a: wp.vec4d, b: wp.vec4d, c: wp.vec4d, n_rows: int, n_cols: i
     raster_triangle(a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2], n_rows, n_cols, zbuf)
 
 
+@wp.func
+def camera_z_mm(depth: wp.array2d(dtype=wp.uint16), r: int, c: int, cam: vec9d):
+    """Camera depth (mm) of pixel (r, c), as `prior.backproject_mm` (the depth-jump rule compares these)."""
+    return wp.float64(depth[r, c]) * cam[4]
+
+
+@wp.func
+def close_mm(za: wp.float64, zb: wp.float64, max_jump_mm: wp.float64):
+    """The depth-jump rule for one edge: |za - zb| <= max_jump_mm (a negative max_jump_mm = no rule)."""
+    return max_jump_mm < wp.float64(0.0) or wp.abs(za - zb) <= max_jump_mm
+
+
 @wp.kernel(enable_backward=False)
-def raster_camera_quads(depth: wp.array2d(dtype=wp.uint16), mask: wp.array2d(dtype=wp.uint8), use_mask: int, cam: vec9d,
-                        xf: wp.mat44d, n_rows: int, n_cols: int, zbuf: wp.array(dtype=wp.float64)):
-    """One 2x2 quad of the depth image: its triangles (cases of `prior.grid_triangles`) into the z-buffer."""
+def raster_camera_quads(depth: wp.array2d(dtype=wp.uint16), mask: wp.array2d(dtype=wp.uint8), use_mask: int,
+                        cam: vec9d, xf: wp.mat44d, max_jump_mm: wp.float64, n_rows: int, n_cols: int,
+                        zbuf: wp.array(dtype=wp.float64)):
+    """One 2x2 quad of the depth image: its triangles into the z-buffer, as `metrics.triangulation.
+    lattice_triangles` forms them (rule 'sound'): four valid corners give (p00, p10, p01) when |z00 - z10| and
+    |z10 - z01| are <= max_jump_mm and (p11, p01, p10) when |z11 - z01| and |z01 - z10| are; three valid corners
+    give their triangle (in 00, 01, 10, 11 order) when all three of its jumps are (camera millimetres)."""
     q = wp.tid()
     w1 = depth.shape[1] - 1
     r = q // w1
@@ -119,14 +136,30 @@ def raster_camera_quads(depth: wp.array2d(dtype=wp.uint16), mask: wp.array2d(dty
     v01 = p01[3] > wp.float64(0.5)
     v10 = p10[3] > wp.float64(0.5)
     v11 = p11[3] > wp.float64(0.5)
-    if v00 and v10 and v01:
-        raster_corners(p00, p10, p01, n_rows, n_cols, zbuf)
-    if v11 and v01 and v10:
-        raster_corners(p11, p01, p10, n_rows, n_cols, zbuf)
-    if v00 and v10 and v11 and not v01:
-        raster_corners(p00, p10, p11, n_rows, n_cols, zbuf)
-    if v00 and v11 and v01 and not v10:
-        raster_corners(p00, p11, p01, n_rows, n_cols, zbuf)
+    n_valid = int(v00) + int(v01) + int(v10) + int(v11)
+    if n_valid < 3:
+        return
+    z00 = camera_z_mm(depth, r, c, cam)
+    z01 = camera_z_mm(depth, r, c + 1, cam)
+    z10 = camera_z_mm(depth, r + 1, c, cam)
+    z11 = camera_z_mm(depth, r + 1, c + 1, cam)
+    if n_valid == 4:
+        if close_mm(z00, z10, max_jump_mm) and close_mm(z10, z01, max_jump_mm):
+            raster_corners(p00, p10, p01, n_rows, n_cols, zbuf)
+        if close_mm(z11, z01, max_jump_mm) and close_mm(z01, z10, max_jump_mm):
+            raster_corners(p11, p01, p10, n_rows, n_cols, zbuf)
+    elif not v00:
+        if close_mm(z01, z10, max_jump_mm) and close_mm(z10, z11, max_jump_mm) and close_mm(z01, z11, max_jump_mm):
+            raster_corners(p01, p10, p11, n_rows, n_cols, zbuf)
+    elif not v01:
+        if close_mm(z00, z10, max_jump_mm) and close_mm(z10, z11, max_jump_mm) and close_mm(z00, z11, max_jump_mm):
+            raster_corners(p00, p10, p11, n_rows, n_cols, zbuf)
+    elif not v10:
+        if close_mm(z00, z01, max_jump_mm) and close_mm(z01, z11, max_jump_mm) and close_mm(z00, z11, max_jump_mm):
+            raster_corners(p00, p01, p11, n_rows, n_cols, zbuf)
+    else:
+        if close_mm(z00, z01, max_jump_mm) and close_mm(z01, z10, max_jump_mm) and close_mm(z00, z10, max_jump_mm):
+            raster_corners(p00, p01, p10, n_rows, n_cols, zbuf)
 
 
 @wp.kernel(enable_backward=False)
