@@ -128,10 +128,10 @@ class _Manifest:
 
 
 def _remove_stale_temporaries(object_dir: Path, distance_cm: int) -> None:
-    """Delete leftovers of interrupted runs (hidden temp/old folders whose process is gone)."""
+    """Delete leftovers of interrupted runs (hidden temp/old folders); the caller holds the root's lock, so no live
+    writer on any host owns one (ownership.is_leftover)."""
     for entry in object_dir.glob(f".{distance_cm}.*"):
-        match = ownership.TEMP_FOLDER.match(entry.name)
-        if match and not ownership.pid_alive(int(match.group(3))):
+        if ownership.is_leftover(entry):
             shutil.rmtree(entry, ignore_errors=True)
 
 

@@ -5,7 +5,7 @@ missing root is claimed by creating the manifest first, atomically (O_CREAT | O_
 written, so a concurrent job never sees generator output without the manifest. Any other content (e.g. the real
 MAROON dataset) makes the root foreign and it is never written. The generator's own hidden leftovers (temp folders
 `<object>/.<distance>.tmp-<pid>-<token>` and `.old-` folders of a crashed run, lock and temp files) never make a
-root look foreign.
+root look foreign; they are removed by the next writer, judged by the lock, not by process ids (is_leftover).
 
 Writers serialise on an exclusive flock of `<root>/.synth.lock`: parallel sweep jobs that all ask for the same
 captures wait for the first one and then find them cached.
@@ -171,12 +171,10 @@ def check_replaceable(capture_dir: Path, recorded: dict) -> None:
                                             "it (delete the folder to regenerate it)")
 
 
-def pid_alive(pid: int) -> bool:
-    """Whether a process with this id exists on this machine (a temp folder's owner)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
+def is_leftover(entry: Path) -> bool:
+    """Whether `entry` is a generator temp/old folder, hence a leftover of a writer that died. Call it only while
+    holding the root's lock (`exclusive`): every writer holds that lock for as long as its temp folder exists, so
+    a temp folder seen by the lock holder belongs to no live writer, on this host or any other sharing the file
+    system. Process ids are not consulted: they mean nothing on another node and are reused."""
+    return TEMP_FOLDER.match(entry.name) is not None
     return True

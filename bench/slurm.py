@@ -1,0 +1,258 @@
+"""SLURM sweeps that hold on real clusters: hydra-submitit-launcher's SLURM launcher, one job per cell.
+
+`hydra/launcher=slurm_cpu` / `slurm_gpu` (configs/hydra/launcher/) use `CheckedSlurmLauncher`, which, in the
+submitting process and before anything is submitted:
+
+* checks that the sweep directory, the store, the dataset root and submitit's folder are absolute-able paths on a
+  file system the nodes can share (not /tmp, /var/tmp, /dev/shm, /run or a tmpfs: a node's private disk), unless
+  `BENCH_SLURM_LOCAL_PATHS=1` (a single-node cluster); the jobs get them as absolute paths, so a job that starts in
+  another directory still writes where the merge looks;
+* generates the synthetic captures the sweep needs, once (jobs then find them cached and never generate);
+* points every job at one Warp kernel cache beside the store (`WARP_CACHE_PATH`; Warp >= 1.2 builds into a temp
+  folder and renames it, so concurrent jobs may share it), instead of one /tmp folder per job;
+* sizes each cell's job: its name (`bench-<cell>`), GPUs (1 for device=cuda, none otherwise), CPUs per task
+  (at most what a node of the partition has: more would leave the job pending forever), and, with
+  `timeout_min: 0`, a time limit from the cell (`time_limit_min`).
+
+Then it waits for every job without relying on accounting: a job is done when submitit's result file appears, and
+dead when SLURM no longer lists it (squeue) and no result came; its cause comes from `sacct` where accounting
+exists, else from its log (time limit, cancellation, out of memory, the job's own `error:` line). When any job did
+not finish, the rows of the jobs that did are merged (bench.sweep), each missing cell is named with its cause on
+stderr, and the sweep exits 1. A re-run of the same command recomputes only the missing cells (the store).
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from hydra.core.singleton import Singleton
+from hydra.core.utils import JobReturn, filter_overrides
+from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
+from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
+from omegaconf import DictConfig, OmegaConf, open_dict
+
+from bench import cli
+
+LOCAL_PREFIXES = ("/tmp", "/var/tmp", "/dev/shm", "/run")
+LOCAL_FS_TYPES = {"tmpfs", "ramfs", "devtmpfs"}
+POLL_S = 2.0
+GONE_GRACE_S = 15.0         # a finished job's result file may show on a shared file system a little later
+# Minutes per capture frame on one node, generous (README "The main job" and notes/gpu.md measured ~20 min for
+# BP_max on the paper grid on 2 CPU cores, ~1 s for the FSK methods): (method, many frequencies?, grid, device).
+FRAME_MINUTES = {("bp", True, "paper", "cpu"): 30.0, ("bp", False, "paper", "cpu"): 4.0,
+                 ("bp", True, "paper", "cuda"): 0.2, ("bp", False, "paper", "cuda"): 0.1}
+DEFAULT_FRAME_MINUTES = {"bp": 1.0, "2fsk": 0.1, "3fsk": 0.1, "mm2fsk": 0.1}
+SETUP_MINUTES = 10          # Python start, imports, reading the captures, Warp compilation on a cold cache
+
+
+def time_limit_min(cfg: DictConfig, captures: int) -> int:
+    """A job's time limit (minutes) from its cell: frames x FRAME_MINUTES x 3 + SETUP_MINUTES, in 5-minute steps."""
+    method, freqs = str(cfg.method.name), cfg.freq.f_ghz
+    many = freqs is None or len(freqs) > 3
+    key = (method, many, str(cfg.grid.name), "cuda" if str(cfg.device) == "cuda" else "cpu")
+    per_frame = FRAME_MINUTES.get(key, DEFAULT_FRAME_MINUTES.get(method, 1.0))
+    return int(5 * math.ceil((SETUP_MINUTES + 3 * per_frame * max(captures, 1)) / 5))
+
+
+def _mount_type(path: Path) -> str:
+    """File system type of the mount holding `path` (/proc/mounts; '' where unknown)."""
+    best, kind = "", ""
+    try:
+        for line in Path("/proc/mounts").read_text().splitlines():
+            fields = line.split()
+            mount = fields[1].replace("\\040", " ")
+            if str(path).startswith(mount.rstrip("/") + "/") or str(path) == mount:
+                if len(mount) > len(best):
+                    best, kind = mount, fields[2]
+    except OSError:
+        return ""
+    return kind
+
+
+def check_shared(path: Path, what: str) -> None:
+    """A UserError unless `path` lies on a file system other nodes can see (heuristic: not node-local)."""
+    if os.environ.get("BENCH_SLURM_LOCAL_PATHS") == "1":
+        return
+    real = Path(os.path.realpath(path))
+    if any(str(real) == p or str(real).startswith(p + "/") for p in LOCAL_PREFIXES) or \
+            _mount_type(real) in LOCAL_FS_TYPES:
+        raise cli.UserError(what, f"{real} is on a node-local file system; SLURM jobs on other nodes cannot see "
+                                  "it: use a shared path (or BENCH_SLURM_LOCAL_PATHS=1 on a single-node cluster)")
+
+
+def node_cpus(partition: str | None) -> int | None:
+    """The most CPUs one node of the partition has (sinfo), or None where sinfo cannot say."""
+    command = ["sinfo", "-h", "-o", "%c"] + (["-p", partition] if partition else [])
+    try:
+        out = subprocess.run(command, capture_output=True, text=True, timeout=30).stdout
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    values = [int(v.rstrip("+")) for v in out.split() if v.rstrip("+").isdigit()]
+    return max(values) if values else None
+
+
+def listed_jobs() -> set[str] | None:
+    """Job ids SLURM still lists (pending or running), or None where squeue fails."""
+    try:
+        proc = subprocess.run(["squeue", "-h", "-o", "%i"], capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return set(proc.stdout.split()) if proc.returncode == 0 else None
+
+
+def death_cause(job, timeout_min: int, mem_gb: int | None) -> str:
+    """Why a job ended without a result: sacct's state where accounting exists, else what its log says."""
+    try:
+        proc = subprocess.run(["sacct", "-n", "-P", "-X", "-j", str(job.job_id), "-o", "State,ExitCode"],
+                              capture_output=True, text=True, timeout=30)
+        state = proc.stdout.split("\n")[0].strip() if proc.returncode == 0 else ""
+    except (OSError, subprocess.TimeoutExpired):
+        state = ""
+    log = ""
+    for path in (job.paths.stderr, job.paths.stdout):
+        if Path(path).is_file():
+            log += Path(path).read_text(errors="replace")[-20000:]
+    errors = [line for line in log.splitlines() if line.startswith("error:")]
+    if "TIMEOUT" in state or "DUE TO TIME LIMIT" in log:
+        return f"timed out (time limit {timeout_min} min)"
+    if "OUT_OF_MEMORY" in state or re.search(r"oom[-_ ]kill|Out Of Memory", log, re.IGNORECASE):
+        return f"out of memory (mem_gb={mem_gb})"
+    if "CANCELLED" in state or "CANCELLED" in log:
+        return "cancelled (scancel or an administrator)"
+    if errors:
+        return errors[-1].removeprefix("error:").strip()
+    if state:
+        return f"ended {state.replace('|', ', exit code ')} without a result"
+    return "ended without a result (killed, node failure or out of memory; no accounting here to say which)"
+
+
+class CheckedSlurmLauncher(SlurmLauncher):
+    """hydra-submitit's SLURM launcher with the checks, sizing and failure handling of the module doc."""
+
+    def _paths(self) -> dict[str, Path]:
+        cfg = self.config
+        paths = {"hydra.sweep.dir": Path(str(cfg.hydra.sweep.dir)),
+                 "hydra.launcher.submitit_folder": Path(str(self.params["submitit_folder"])),
+                 "dataset.root": Path(str(cfg.dataset.root))}
+        if cfg.store.dir is not None:
+            paths["store.dir"] = Path(str(cfg.store.dir))
+        return {key: path.absolute() for key, path in paths.items()}
+
+    def _prepare_data(self) -> None:
+        """Generate the synthetic captures once, here, before any job starts (bench.app's rule for when)."""
+        from bench.app import _ensure_synthetic, synthetic_asked
+
+        overrides = list(self.config.hydra.overrides.task)
+        if synthetic_asked(overrides):
+            print(f"preparing the synthetic captures in {self._paths()['dataset.root']} before submitting",
+                  flush=True)
+            _ensure_synthetic(self.config.dataset, self._paths()["dataset.root"], self.config.synth)
+
+    def launch(self, job_overrides, initial_job_idx: int) -> list[JobReturn]:
+        import submitit
+
+        paths = self._paths()
+        try:
+            for key, path in paths.items():
+                check_shared(path, key)
+        except cli.UserError as err:
+            cli.fail(str(err))
+        self._prepare_data()
+        if "store.dir" in paths:
+            os.environ.setdefault("WARP_CACHE_PATH", str(paths["store.dir"] / "warp-cache"))
+        executor = submitit.AutoExecutor(folder=str(paths["hydra.launcher.submitit_folder"]), cluster="slurm",
+                                         slurm_max_num_timeout=int(self.params.get("max_num_timeout", 0)))
+        generic = set(OmegaConf.structured(BaseQueueConf).keys())       # the rest are slurm_<name> (as submitit's)
+        fixed = {k if k in generic else f"slurm_{k}": v for k, v in self.params.items()
+                 if k not in {"submitit_folder", "max_num_timeout", "timeout_min", "gpus_per_node", "name",
+                              "array_parallelism", "cpus_per_task"} and v not in (None, {}, [])}
+        cpus = int(self.params.get("cpus_per_task") or 1)
+        available = node_cpus(self.params.get("partition"))
+        if available is not None and cpus > available:
+            print(f"cpus_per_task={cpus} is more than a node of the partition has ({available}): using {available}",
+                  flush=True)
+            cpus = available
+        absolute = [f"hydra.sweep.dir={paths['hydra.sweep.dir']}", f"dataset.root={paths['dataset.root']}"]
+        if "store.dir" in paths:
+            absolute.append(f"store.dir={paths['store.dir']}")
+        paths["hydra.sweep.dir"].mkdir(parents=True, exist_ok=True)
+        jobs = []
+        for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
+            overrides = [*overrides, *absolute]
+            cfg = self.hydra_context.config_loader.load_sweep_config(self.config, overrides)
+            with open_dict(cfg.hydra.job):
+                cfg.hydra.job.num = idx          # the job folder's name (hydra.sweep.subdir) needs it
+            cell = cfg.hydra.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
+            captures = len(cfg.dataset.captures) if cfg.dataset.captures is not None else _count(paths)
+            timeout = int(self.params.get("timeout_min") or 0) or time_limit_min(cfg, captures)
+            gpus = 1 if str(cfg.device) == "cuda" else None
+            executor.update_parameters(**fixed, name=f"bench-{cell}", timeout_min=timeout, cpus_per_task=cpus,
+                                       gpus_per_node=gpus)
+            job = executor.submit(self, overrides, "hydra.sweep.dir", idx, f"job_id_for_{idx}", Singleton.get_state())
+            print(f"[submitted {idx + 1}/{len(job_overrides)}] {cell}: job {job.job_id}, {timeout} min, "
+                  f"{cpus} CPUs{', 1 GPU' if gpus else ''} ({' '.join(filter_overrides(overrides))})", flush=True)
+            jobs.append((idx, cell, timeout, job, cfg))
+        returns, missing = self._wait(jobs)
+        if missing:
+            self._report_missing(missing)
+        return returns
+
+    def _wait(self, jobs) -> tuple[list[JobReturn], list[tuple[str, str]]]:
+        """Results of the jobs that finished, and (cell, cause) of those that did not."""
+        pending, returns, missing, gone_since = list(jobs), [], [], {}
+        while pending:
+            listed = listed_jobs()
+            for entry in list(pending):
+                idx, cell, timeout, job, cfg = entry
+                if Path(job.paths.result_pickle).exists():
+                    pending.remove(entry)
+                    try:
+                        returns.append(job.results()[0])
+                        print(f"[done] {cell}: job {job.job_id}", flush=True)
+                    except Exception as err:   # noqa: BLE001 -- submitit re-raises the job's own exception
+                        missing.append((cell, f"job {job.job_id} failed: {str(err).strip().splitlines()[-1]}"))
+                elif listed is not None and str(job.job_id) not in listed:
+                    first = gone_since.setdefault(job.job_id, time.monotonic())
+                    if time.monotonic() - first > GONE_GRACE_S:
+                        pending.remove(entry)
+                        cause = death_cause(job, timeout, self.params.get("mem_gb"))
+                        missing.append((cell, f"job {job.job_id} {cause}; log: {job.paths.stderr}"))
+            if pending:
+                time.sleep(POLL_S)
+        for _, cell, _, _, cfg in jobs:
+            job_dir = Path(str(cfg.hydra.sweep.dir)) / str(cfg.hydra.sweep.subdir)
+            if not (job_dir / "results.csv").is_file() and cell not in {c for c, _ in missing}:
+                missing.append((cell, f"finished but wrote no {job_dir}/results.csv"))
+        return returns, missing
+
+    def _report_missing(self, missing: list[tuple[str, str]]) -> None:
+        """Merge what finished, name each missing cell and its cause, exit 1."""
+        from bench import sweep
+
+        root = self._paths()["hydra.sweep.dir"]
+        try:
+            sweep.report(root, self.config.report.table)
+            merged = f"the rows of the finished cells are merged into {root}/results.csv"
+        except FileNotFoundError:
+            merged = "no cell finished: nothing to merge"
+        for cell, cause in missing:
+            print(f"error: {cell}: {cause}", file=sys.stderr, flush=True)
+        print(f"error: {len(missing)} cell(s) did not finish; {merged}; run the same command again to compute only "
+              "the missing cells (the store keeps the finished ones)", file=sys.stderr, flush=True)
+        sys.exit(1)
+
+
+def _count(paths: dict[str, Path]) -> int:
+    from bench import maroon
+
+    try:
+        return len(maroon.discover_captures(paths["dataset.root"]))
+    except Exception:   # noqa: BLE001 -- only a time estimate: unknown counts as one capture
+        return 1
+
+

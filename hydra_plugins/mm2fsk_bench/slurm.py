@@ -1,0 +1,6 @@
+"""The SLURM launcher of configs/hydra/launcher/slurm_cpu.yaml and slurm_gpu.yaml; the work is in bench.slurm."""
+from bench.slurm import CheckedSlurmLauncher as _CheckedSlurmLauncher
+
+
+class CheckedSlurmLauncher(_CheckedSlurmLauncher):
+    """bench.slurm.CheckedSlurmLauncher, registered where Hydra looks for plugins."""
