@@ -10,7 +10,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="$(realpath -m "${1:-outputs/slurm-try}")"
-python=.venv/bin/python
+python="${PYTHON:-.venv/bin/python}"   # PYTHON=... to use another environment
 bash scripts/slurm_single_node.sh start >/dev/null
 rm -rf "$out"; mkdir -p "$out"
 export BENCH_SLURM_LOCAL_PATHS=1
