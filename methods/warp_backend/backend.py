@@ -45,7 +45,11 @@ class WarpBackend(Backend):
         return self._points(signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs=False)
 
     def correlate_summed(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel: str | None = None) -> np.ndarray:
-        """complex64 (N,), the frequency sum taken on the device."""
+        """complex64 (N,), the frequency sum taken on the device; many equidistant frequencies (BP_max's search)
+        gather from range-compressed profiles as the volume does (`kernel` None), so a point and the voxel at the
+        same position get the same value."""
+        if kernel is None:
+            kernel = self._volume_kernel(np.asarray(freqs_hz, dtype=np.float64), "auto")
         return self._points(signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs=True)[0]
 
     def _points(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs):

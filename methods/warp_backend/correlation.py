@@ -29,15 +29,16 @@ def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
     return n_rx + n_tx, f_rx + f_tx
 
 
-def _range_launch(inputs: FrameInputs, freqs_hz, x, y, z, out, grid_m):
-    """Upload the DFT tables once; return a function that builds the range profiles and gathers every voxel."""
+def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box_m):
+    """Upload the DFT tables once; return a function that builds the range profiles over the paths the box
+    `box_m` = (x_m, y_m, z_m) can reach and gathers every voxel (flag 1) or point (flag 0)."""
     rplan = range_compression.plan(freqs_hz)
     if rplan is None:
         raise ValueError("range compression needs >= 2 distinct frequencies on an equidistant grid "
                          f"with df < c / {range_compression.MAX_PATH_M} m")
     dev = inputs.device
     n_freqs, n_rx, n_tx_pad = inputs.signal_padded.shape
-    m0, n_window = range_compression.sample_window(rplan, *path_window_m(inputs.tx_m, inputs.rx_m, *grid_m))
+    m0, n_window = range_compression.sample_window(rplan, *path_window_m(inputs.tx_m, inputs.rx_m, *box_m))
     sig_pairs = inputs.signal_padded.numpy().reshape(n_freqs, n_rx * n_tx_pad, 2).transpose(1, 0, 2)
     sig = wp.array(np.ascontiguousarray(sig_pairs), dtype=wp.vec2f, device=dev)
     m = np.arange(rplan.n_samples)
@@ -46,7 +47,7 @@ def _range_launch(inputs: FrameInputs, freqs_hz, x, y, z, out, grid_m):
     index = wp.array(rplan.grid_index.astype(np.int32), dtype=wp.int32, device=dev)
     profiles = wp.empty((n_rx * n_tx_pad, n_window), dtype=wp.vec2h, device=dev)
     k_c = 2 * np.pi * rplan.f_carrier_hz / C_M_PER_S
-    gather_args = [x, y, z, inputs.rx, inputs.tx_padded, wp.float32(k_c),
+    gather_args = [flag, points, x, y, z, inputs.rx, inputs.tx_padded, wp.float32(k_c),
                    wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S), wp.float32(rplan.samples_per_m),
                    wp.float32(m0), profiles, out]
 
@@ -62,8 +63,9 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
                 points_m=None, grid_m=None, sum_freqs: bool = False, reuse: bool = False):
     """Upload inputs once; return a function that runs `kernel` and returns the device output (rows, N) vec2f.
 
-    kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct" or "range" (grid only; the range
-    profiles are rebuilt on every call, as a new frame needs). Points come from `points_m` (N, 3) or from
+    kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct" or "range" (frequency sum only; the
+    range profiles are rebuilt on every call, as a new frame needs, over the paths the grid's or the points' box
+    can reach). Points come from `points_m` (N, 3) or from
     `grid_m` = (x_m, y_m, z_m); with a grid the output is summed over frequencies, flat in (z, y, x) order.
     Frame inputs are cached by content; with `reuse` the output and work buffers are pre-allocated ones shared
     between calls (the API copies the output back before returning). The benchmark times the returned function.
@@ -71,6 +73,12 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
     inputs = frames.inputs(signal, freqs_hz, tx_m, rx_m)
     dev = inputs.device
     empty = wp.empty(0, dtype=wp.float64, device=dev)
+    if kernel == "range" and grid_m is None:           # the profile window needs the points' box on the host
+        if isinstance(points_m, wp.array):
+            raise ValueError("the range kernel takes host points (their box sets the profile window)")
+        box_m = tuple(np.asarray(points_m, dtype=np.float64).reshape(-1, 3).T)
+    else:
+        box_m = grid_m
     if grid_m is None:
         if not isinstance(points_m, wp.array):          # (a device-resident vec3d array is used as it is)
             points_m = wp.array(points_m, dtype=wp.vec3d, device=dev)
@@ -81,8 +89,10 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
     n_out = points_m.shape[0] if grid_m is None else x.shape[0] * y.shape[0] * z.shape[0]
     out_shape = (1 if sum_freqs else inputs.n_freqs, n_out)
     out = buffers.get("out", out_shape, wp.vec2f) if reuse else wp.empty(out_shape, dtype=wp.vec2f, device=dev)
-    if kernel == "range" and grid_m is not None:
-        return _range_launch(inputs, freqs_hz, x, y, z, out, grid_m)
+    if kernel == "range":
+        if not sum_freqs:
+            raise ValueError("the range kernel gives the frequency sum only (sum_freqs=True)")
+        return _range_launch(inputs, freqs_hz, flag, points, x, y, z, out, box_m)
     if kernel == "tc":
         rx4, tx4, gain, mat = inputs.tile_tables()
         if reuse:

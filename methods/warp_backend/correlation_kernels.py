@@ -308,18 +308,17 @@ def range_profiles(signal: wp.array2d(dtype=wp.vec2f), grid_index: wp.array(dtyp
 
 
 @wp.kernel(module="unique", module_options={"enable_backward": False, "max_unroll": 32})
-def range_gather(x: wp.array(dtype=wp.float64), y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
+def range_gather(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.float64),
+                 y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
                  rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
                  carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
                  profiles: wp.array2d(dtype=wp.vec2h), out: wp.array2d(dtype=wp.vec2f)):
-    """Voxel value (thread i = flat voxel i): sum over pairs of carrier phasor times the linearly interpolated range
-    profile. Tx (padded to a multiple of TX_CHUNK, zero profiles in the pads) in chunks of RANGE_CHUNK whose sample
-    offsets and carrier phasors stay in registers; the profile window starts at sample m0 (path lengths the volume
-    can reach)."""
+    """Value at voxel or point i (`point_at`: flat voxel i of the grid x, y, z, or points[i]): sum over pairs of
+    carrier phasor times the linearly interpolated range profile. Tx (padded to a multiple of TX_CHUNK, zero
+    profiles in the pads) in chunks of RANGE_CHUNK whose sample offsets and carrier phasors stay in registers; the
+    profile window starts at sample m0 (path lengths the volume or the points' box can reach)."""
     i = wp.tid()
-    nx = x.shape[0]
-    ny = y.shape[0]
-    p64 = wp.vec3d(x[i % nx], y[(i // nx) % ny], z[i // (nx * ny)])
+    p64 = point_at(i, grid, points, x, y, z)
     norm64 = wp.length(p64)
     p = wp.vec3f(p64)
     norm = wp.float32(norm64)
