@@ -233,3 +233,11 @@ def test_ground_truth_registration_residual_has_the_set_size():
     assert np.linalg.norm(residual[:3, 3]) == pytest.approx(1e-3)
     assert np.degrees(np.arccos((np.trace(residual[:3, :3]) - 1) / 2)) == pytest.approx(0.2, rel=1e-6)
     assert np.array_equal(_registration_residual(SynthConfig(), np.random.default_rng(0)), np.eye(4))
+
+
+def test_depth_scale_error_scales_the_camera_depth():
+    plain, _ = _render("01_plate")
+    scaled, _ = _render("01_plate", depth_scale_error=0.02)
+    both = (plain.mask == 255) & (plain.depth_mm > 0) & (scaled.depth_mm > 0)
+    ratio = np.median(scaled.depth_mm[both].astype(float) / plain.depth_mm[both])
+    assert ratio == pytest.approx(1.02, abs=0.004)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-GENERATOR_VERSION = "3"          # bump when the generator's output changes for an unchanged config
+GENERATOR_VERSION = "4"          # bump when the generator's output changes for an unchanged config
 C_M_PER_S = 299_792_458.0
 F_LOW_GHZ, F_HIGH_GHZ = 72.0, 82.0
 QUARTER_WAVELENGTH_M = C_M_PER_S / (F_HIGH_GHZ * 1e9) / 4.0   # 0.914 mm at 82 GHz
@@ -60,6 +60,7 @@ class SynthConfig:
     edge_fattening_px: int = 0               # foreground spreads this far over depth edges (mixed and flying pixels)
     flying_pixel_fraction: float = 0.3       # share of the edge band given a depth between the two sides
     slant_bias_px: float = 0.0               # disparity bias * tan(incidence): depth bias on slanted surfaces
+    depth_scale_error: float = 0.0           # camera depth reads (1 + this) x the true Z (data sheet: |error| <= 2 %)
     # radar
     radar_materials: bool = False            # Fresnel reflection and roughness of each part's material (materials.py)
     scattering: str = "cosine"               # "cosine": area * cos^q law; "specular": lobe around the mirror direction
@@ -140,6 +141,7 @@ EFFECTS: dict[str, dict] = {
     "camera materials": {"camera_materials": False},
     "camera edge pixels": {"edge_fattening_px": 0},
     "camera slant bias": {"slant_bias_px": 0.0},
+    "camera depth scale": {"depth_scale_error": 0.0},
     "radar materials": {"radar_materials": False},
     "specular scattering": {"scattering": "cosine"},
     "element pattern": {"element_exponent": 0.0},
@@ -154,10 +156,11 @@ EFFECTS: dict[str, dict] = {
 PRESETS: dict[str, SynthConfig] = {
     "ideal": SynthConfig(),
     "realistic": SynthConfig(
-        extrinsic_error_mm=2.0, extrinsic_error_deg=0.5, camera_materials=True, edge_fattening_px=2,
-        slant_bias_px=0.3, radar_materials=True, scattering="specular", element_exponent=1.0, transmission=True,
-        channel_amplitude_db=0.5, channel_phase_deg=5.0, clutter_model="scene", mount=True, noise_model="datasheet",
-        amplitude_scale=PLATE_AMPLITUDE_SCALE, gt_registration_mm=1.0, gt_registration_deg=0.2),
+        extrinsic_error_mm=3.0, extrinsic_error_deg=0.5, camera_materials=True, edge_fattening_px=2,
+        slant_bias_px=0.3, depth_scale_error=0.01, radar_materials=True, scattering="specular", element_exponent=1.0,
+        transmission=True, channel_amplitude_db=0.5, channel_phase_deg=5.0, clutter_model="scene",
+        wall_distance_m=2.0, mount=True, noise_model="datasheet", amplitude_scale=PLATE_AMPLITUDE_SCALE,
+        gt_registration_mm=1.0, gt_registration_deg=0.2),
 }
 DEFAULT_PRESET = "realistic"     # of the demo, the Hydra app and the committed results
 

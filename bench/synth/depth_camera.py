@@ -145,10 +145,10 @@ def _edge_pixels(z: np.ndarray, filled_m: np.ndarray, jump: np.ndarray, config: 
 
 def _slant_and_material_errors(z: np.ndarray, cos_inc: np.ndarray, geometry: np.ndarray, scene: Scene,
                                config: SynthConfig, rng: np.random.Generator) -> np.ndarray:
-    """Depth bias on slanted surfaces and the errors of each part's material (bench.synth.materials)."""
+    """Depth scale error, bias on slanted surfaces and the errors of each part's material (bench.synth.materials)."""
     from bench.synth.materials import MATERIALS
 
-    z = z.copy()
+    z = z * (1.0 + config.depth_scale_error)          # the device's absolute (scale) error
     if config.slant_bias_px:
         tan_inc = np.sqrt(1.0 - np.clip(cos_inc, 0.2, 1.0) ** 2) / np.clip(cos_inc, 0.2, 1.0)
         z += z ** 2 * config.slant_bias_px * tan_inc / (config.focal_px * config.stereo_baseline_m)
@@ -178,7 +178,7 @@ def render(scene: Scene, pose: CameraPose, config: SynthConfig, rng: np.random.G
     """Depth (uint16 mm, 0 = invalid), object mask and RGB of `scene` seen from `pose` (the true pose)."""
     z_m, cos_inc, geometry = _cast(scene, pose, config)
     noisy_m = _stereo_errors(z_m, cos_inc, config, rng)
-    if config.slant_bias_px or config.camera_materials:
+    if config.slant_bias_px or config.camera_materials or config.depth_scale_error:
         noisy_m = _slant_and_material_errors(noisy_m, cos_inc, geometry, scene, config, rng)
     depth_mm = np.where(np.isfinite(noisy_m), np.rint(noisy_m * 1000.0), 0)
     depth_mm = np.clip(depth_mm, 0, 65535).astype(np.uint16)

@@ -3,14 +3,17 @@
 Radar: the normal-incidence Fresnel amplitude reflection coefficient |(1 - n) / (1 + n)| with n = sqrt(eps_r) from
 the relative permittivity at W band; the one-way power transmission through a wall is (1 - Gamma^2)^2 (two
 interfaces, loss neglected for thin walls); the surface roughness (m) widens the quasi-specular lobe
-(`lobe_deg`: half-width of the return around the mirror direction) and jitters the phase.
+(`lobe_deg`: half-width of the return around the mirror direction, standing for the spread of the surface's
+slopes at the wavelength scale: the least constrained values here, no W-band measurement of these objects exists;
+the ablation of `python -m bench.agreement` shows their weight) and jitters the phase.
 Permittivities: metal (perfect conductor); PE/PP plastics eps_r 2.3-2.4 and dry wood 1.99 (ITU-R P.2040-3,
 Table 3, "wood" valid 0.001-100 GHz); cardboard ~1.9 and expanded polystyrene foam ~1.03 at 77-80 GHz (typical
 values of mm-wave material measurements, e.g. the radome / packaging literature); foam is nearly transparent.
 
 Camera (Intel RealSense D435, active IR stereo): translucent plastics scatter the projected pattern below the
-surface, so the stereo match lies behind it (`subsurface_bias_m`, a few mm for white PE/PP, as reported for
-structured-light and active stereo on translucent objects); specular metal reflects the pattern away (holes,
+surface, so the stereo match lies behind it (`subsurface_bias_m`: 6 mm for white PE/PP; Lourenco and Araujo,
+Sensors 22(19) 7378, 2022, measure RealSense depth on translucent objects several mm to cm behind the surface);
+specular metal reflects the pattern away (holes,
 `dropout_fraction`) or mirrors other surfaces (outliers, `outlier_fraction`); dark and matte surfaces behave.
 The numbers are stated here once and every effect can be switched off in `SynthConfig`.
 """
@@ -50,9 +53,9 @@ class Material:
 
 
 MATERIALS: dict[str, Material] = {
-    "metal": Material(None, 0.02e-3, 6.0, 0.0, 0.05, 0.01),
-    "plastic": Material(2.35, 0.05e-3, 10.0, 4e-3, 0.01, 0.0, True),
-    "wood": Material(1.99, 0.2e-3, 20.0, 0.5e-3, 0.0, 0.0),
-    "cardboard": Material(1.9, 0.3e-3, 25.0, 0.5e-3, 0.0, 0.0, True),
+    "metal": Material(None, 0.02e-3, 15.0, 0.0, 0.05, 0.01),
+    "plastic": Material(2.35, 0.05e-3, 15.0, 6e-3, 0.01, 0.0, True),
+    "wood": Material(1.99, 0.2e-3, 25.0, 0.5e-3, 0.0, 0.0),
+    "cardboard": Material(1.9, 0.3e-3, 30.0, 0.5e-3, 0.0, 0.0, True),
     "foam": Material(1.03, 0.5e-3, 40.0, 1.5e-3, 0.0, 0.0, True),
 }

@@ -160,15 +160,19 @@ def channel_gains(n_rx: int, n_tx: int, config: SynthConfig, rng: np.random.Gene
 
 def wall_frame(tx_m: np.ndarray, rx_m: np.ndarray, freqs_hz: np.ndarray, config: SynthConfig) -> np.ndarray:
     """The back wall z = wall_distance_m as its image source: s = Gamma lambda / (j L) exp(-j k L), L = |tx - rx'|
+    (times the element pattern of both legs)
     with rx' the receiver mirrored in the wall (the stationary-phase value of the model's surface integral; a large
     plate at R gives lambda / (2 R), which is what PLATE_AMPLITUDE_SCALE refers to). Complex64 (n_rx, n_tx, F)."""
     mirrored = np.asarray(rx_m, dtype=np.float64).copy()
     mirrored[:, 2] = 2.0 * config.wall_distance_m - mirrored[:, 2]
-    path_m = np.linalg.norm(mirrored[:, None, :] - np.asarray(tx_m, dtype=np.float64)[None], axis=2)
+    offset_m = mirrored[:, None, :] - np.asarray(tx_m, dtype=np.float64)[None]
+    path_m = np.linalg.norm(offset_m, axis=2)
+    # both legs leave and reach the array at the angle of the image path: the element pattern applies twice
+    element = (offset_m[..., 2] / path_m) ** (2.0 * config.element_exponent)
     wavelength_m = C_M_PER_S / freqs_hz
     cycles = path_m[..., None] / wavelength_m
     cycles -= np.rint(cycles)
-    return (config.wall_reflection * wavelength_m / (1j * path_m[..., None])
+    return (config.wall_reflection * element[..., None] * wavelength_m / (1j * path_m[..., None])
             * np.exp(-2j * np.pi * cycles)).astype(np.complex64)
 
 
