@@ -82,12 +82,24 @@ README_RUNS: dict[str, list[str]] = {
     "python -m bench.inspect DIR": ["{py} -m bench.inspect {synth}"],
     "python -m bench.inspect": ["{py} -m bench.inspect --help"],        # named in prose
     ".venv/bin/python -m bench.perf [--device cpu|cuda] [--sizes paper|small]": ["{py} -m bench.perf --help"],
-    ".venv/bin/python -m bench.perf_frames [--device cpu|cuda]": ["{py} -m bench.perf_frames --help"],
+    ".venv/bin/python -m bench.perf_frames [--device cpu|cuda] [--scene masked|plate] [--root DIR]":
+        ["{py} -m bench.perf_frames --help"],          # minutes on the CPU; its parts run in test_perf_frames
+    ".venv/bin/python -m bench.perf_stream [--device cpu|cuda] [--root DIR --capture OBJECT/DISTANCE]":
+        ["{py} -m bench.perf_stream --help"],          # generates a 10-frame sequence; runs in test_perf_stream
+    ".venv/bin/python -m bench.perf_overhead --root data/synthetic [--device cpu|cuda] [--grid paper]":
+        ["{py} -m bench.perf_overhead --help"],        # a whole table3; runs in test_perf_overhead
+    # frame sequences: generating 10 frames takes minutes; test_frames runs a 3-frame sequence for real
+    ".venv/bin/python -m bench.synth --out data/sequence --objects 04_bottle --distances 30 --frames 10 "
+    "--motion lateral": ["{py} -m bench.synth --help"],
+    ".venv/bin/python -m bench dataset=maroon dataset.root=data/sequence dataset.frame=all method=mm2fsk freq=d10 "
+    "prior=realsense": ["{py} -m bench dataset=maroon dataset.root=data/sequence dataset.frame=all method=mm2fsk "
+                        "freq=d10 prior=realsense --cfg job"],
     ".venv/bin/python -m bench.perf_sweep --root data/synthetic [--device cpu|cuda] [--bp-grid capture|small]":
         ["{py} -m bench.perf_sweep --help"],
     ".venv/bin/python -m bench.perf --device cuda --out results": ["{py} -m bench.perf --help"],
-    r"python -m bench.perf\|perf_frames\|perf_sweep ... [--out DIR]":
-        ["{py} -m bench.perf --help", "{py} -m bench.perf_frames --help", "{py} -m bench.perf_sweep --help"],
+    r"python -m bench.perf\|perf_frames\|perf_stream\|perf_sweep\|perf_overhead ... [--out DIR]":
+        ["{py} -m bench.perf --help", "{py} -m bench.perf_frames --help", "{py} -m bench.perf_stream --help",
+         "{py} -m bench.perf_sweep --help", "{py} -m bench.perf_overhead --help"],
     "python -m bench.stress [--out DIR]": ["{py} -m bench.stress --help"],
     ".venv/bin/python -m bench.stress": ["{py} -m bench.stress --help"],
     ".venv/bin/python -m bench.stress --quick --out /tmp/stress": ["{py} -m bench.stress --help"],   # 30-40 s
@@ -149,7 +161,7 @@ MISTAKES = [
      "error: argument --repeat: must be at least 1, got 0 (see python -m bench.perf --help)"),
     ("perf-out", "{py} -m bench.perf --sizes small --out {file}", EXIT_USER, "error: {file}: output directory is a file"),
     ("perf-frames-device", "{py} -m bench.perf_frames --device gpu", EXIT_USER,
-     "error: argument --device: invalid choice: 'gpu' (choose from 'cpu', 'cuda', 'auto') "
+     "error: argument --device: invalid choice: 'gpu' (choose from 'cpu', 'cuda', 'auto', 'warp-cpu') "
      "(see python -m bench.perf_frames --help)"),
     ("perf-frames-cuda", "{py} -m bench.perf_frames --device cuda --out {tmp}/perf", EXIT_USER,
      "error: --device cuda: Warp sees no CUDA device (use --device cpu or --device auto)"),
@@ -298,10 +310,10 @@ def test_hydra_config_mistake_lists_without_traceback(name, mistake_results):
 
 def test_benchmarks_write_under_outputs_by_default():
     """The tracked results/ is written only when a command is told to (`--out results...`)."""
-    from bench import perf, perf_frames, perf_sweep
+    from bench import perf, perf_frames, perf_overhead, perf_stream, perf_sweep
     from bench.stress import __main__ as stress
 
-    for module in (perf, perf_frames, perf_sweep, stress):
+    for module in (perf, perf_frames, perf_stream, perf_sweep, perf_overhead, stress):
         assert module.DEFAULT_OUT.parts[0] == "outputs", module.__name__
 
 
