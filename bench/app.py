@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import collections
 import functools
+import hashlib
+import inspect
 import logging
 import os
 import socket
@@ -129,9 +131,35 @@ def _roi(cfg: DictConfig) -> str | dict:
     return "auto" if node is None else OmegaConf.to_container(node)
 
 
-def _cell(cfg: DictConfig, device: str) -> dict:
+def _method(cfg: DictConfig):
+    """The configured method (methods.method.Method) from its `_target_` class and `params`; a path that cannot
+    be imported or a class that breaks the interface is a user error of one line."""
+    from methods.method import MethodError
+    from methods.registry import make_method
+
+    try:
+        target = str(cfg.method._target_)
+    except MissingMandatoryValue:
+        raise cli.UserError("method._target_", "give the method's class, e.g. "
+                                               "method._target_=mypkg.mymethod.MyMethod") from None
+    try:
+        return make_method(target, OmegaConf.to_container(cfg.method.params))
+    except MethodError as err:
+        raise cli.UserError(f"method._target_={target}", str(err)) from None
+
+
+def _method_source(method) -> str | None:
+    """sha256 of the file of a method outside the `methods` package (whose sources `code_version` covers)."""
+    cls = type(method)
+    if cls.__module__.split(".")[0] == "methods":
+        return None
+    return hashlib.sha256(Path(inspect.getfile(cls)).read_bytes()).hexdigest()
+
+
+def _cell(cfg: DictConfig, device: str, method) -> dict:
     """Everything but the capture that determines a cell's result (the store key's configuration part)."""
-    return {"method": cfg.method.name, "params": OmegaConf.to_container(cfg.method.params), "roi": _roi(cfg),
+    return {"method": method.name, "target": str(cfg.method._target_), "method_source": _method_source(method),
+            "params": OmegaConf.to_container(cfg.method.params), "roi": _roi(cfg),
             "f_ghz": _container(cfg.freq.f_ghz), "prior": cfg.prior.name,
             "scalar_prior_m": float(cfg.prior.scalar_m), "grid": _container(cfg.grid.override),
             "threshold_db": float(cfg.threshold_db),
@@ -158,7 +186,7 @@ def _ground_truth(capture_dir: Path, capture: Capture) -> GroundTruth:
     return _GROUND_TRUTHS[key]
 
 
-def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str, gt: GroundTruth | None
+def _compute(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, device: str, gt: GroundTruth | None
              ) -> tuple[dict, dict]:
     """Reconstruct on `grid`, then evaluate on the capture's metric grid (the ground truth's; the depth map is
     resampled there when the method computed on another grid): (row without identification columns, arrays on
@@ -166,9 +194,9 @@ def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str, gt
     import methods
 
     targets_ghz = None if cfg.freq.f_ghz is None else [float(f) for f in cfg.freq.f_ghz]
-    rec = methods.reconstruct(capture, method=cfg.method.name, freq=targets_ghz, prior=cfg.prior.name,
+    rec = methods.reconstruct(capture, method=method, freq=targets_ghz, prior=cfg.prior.name,
                               scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
-                              threshold_db=float(cfg.threshold_db), **OmegaConf.to_container(cfg.method.params))
+                              threshold_db=float(cfg.threshold_db))
     metric_grid = capture.radar.grid
     depth_m = resample_depth_m(rec.depth_m, rec.grid, metric_grid)
     if gt is not None:
@@ -176,10 +204,10 @@ def _compute(cfg: DictConfig, capture: Capture, grid: RadarGrid, device: str, gt
     else:
         scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
         log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
-    if rec.extra.get("invalid_reason"):       # the method's own account of an all-invalid result, not just 'no valid'
-        scores["failure"] = rec.extra["invalid_reason"]
+    if rec.invalid_reason:       # the method's own account of an all-invalid result, not just 'no valid'
+        scores["failure"] = rec.invalid_reason
     row = {"f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
-           "runtime_ms": rec.timings_ms["total"], "device": rec.extra.get("device", device),
+           "runtime_ms": rec.timings_ms["total"], "device": rec.device,
            "compute_grid_size": "x".join(map(str, rec.grid.size)), "roi_px": rec.extra.get("roi_px"), **scores}
     row.update({f"t_{stage}_ms": ms for stage, ms in rec.timings_ms.items() if stage != "total"})
     arrays = {"depth_m": depth_m, "magnitude": resample_nearest(rec.magnitude, rec.grid, metric_grid),
@@ -208,7 +236,8 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
         raise DatasetError(root, "dataset root does not exist")
     store = None if cfg.store.dir is None else Store(to_absolute_path(str(cfg.store.dir)))
     device = resolve_device(cfg.device)
-    cell = _cell(cfg, device)
+    method = _method(cfg)
+    cell = _cell(cfg, device, method)
     grid_override = _container(cfg.grid.override)
     spec = parse_frame_spec(OmegaConf.to_container(cfg.dataset.frame) if OmegaConf.is_list(cfg.dataset.frame)
                             else cfg.dataset.frame)
@@ -229,10 +258,11 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
             gt = None if capture.mesh is None else _ground_truth(capture_dir, capture)
             grid = capture.radar.grid
             row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index,
-                   "method": cfg.method.name, "freq": cfg.freq.name, "prior": cfg.prior.name, "grid": cfg.grid.name,
+                   "method": method.name, "label": method.label, "freq": cfg.freq.name, "prior": cfg.prior.name,
+                   "grid": cfg.grid.name,
                    "metrics": "faithful" if cfg.metrics.faithful else "sound",
                    "radar_time_s": capture.radar.timestamp_s, **_pairing_columns(capture, capture_dir)}
-            scores, arrays = _compute(cfg, capture, grid_for(capture, grid_override), device, gt)
+            scores, arrays = _compute(cfg, method, capture, grid_for(capture, grid_override), device, gt)
             row.update(scores, timing=timing, hostname=socket.gethostname(), code_version=cell["code"], key=key)
             if store is not None:
                 store.put(key, row, arrays, _grid_attrs(grid))

@@ -24,11 +24,11 @@ import pandas as pd
 
 from bench import cli
 from methods.frequencies import CONFIGS_GHZ, max_unambiguous_depth_m, select_frequencies
+from methods.registry import BUILTIN, label_of
 
 MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 RESULTS_DIR = Path(__file__).resolve().parents[1] / "results"
 METRICS_CM = ["C_g_cm", "C_s_cm", "P_cm", "P_e_cm"]
-METHOD_LABELS = {"bp": "BP", "2fsk": "2FSK", "3fsk": "3FSK", "mm2fsk": "MM-2FSK"}
 GROUP_COLUMNS = ["method", "freq", "prior", "grid"]
 CAPTURE_COLUMNS = ["object", "distance", "frame"]
 PER_CAPTURE = ["object", "distance"]           # frames of a capture are averaged first, then the captures
@@ -59,14 +59,30 @@ def _nominal_delta(name: str) -> str:
     return f"Δ{float('0.' + digits[1:]) if digits.startswith('0') else float(digits)}"
 
 
-def row_label(method: str, freq: str) -> str:
-    """The paper's row names: BP_max, BP Δ0.5, 2FSK Δ1.0, 3FSK(Δ0.5, Δ10.0), MM-2FSK Δ10.0."""
+def row_label(method: str, freq: str, label: str | None = None) -> str:
+    """The paper's row names: BP_max, BP Δ0.5, 2FSK Δ1.0, 3FSK(Δ0.5, Δ10.0), MM-2FSK Δ10.0. `label` is the
+    method's own (its class's `label`, the rows' `label` column); by default that of the built-in `method`."""
+    label = label or label_of(method)
     if freq == "full":
-        return f"{METHOD_LABELS[method]}_max"
+        return f"{label}_max"
     parts = [_nominal_delta(part) for part in freq.split("_")]
     if len(parts) == 1:
-        return f"{METHOD_LABELS[method]} {parts[0]}"
-    return f"{METHOD_LABELS[method]}({', '.join(parts)})"
+        return f"{label} {parts[0]}"
+    return f"{label}({', '.join(parts)})"
+
+
+def method_labels(rows: pd.DataFrame) -> dict[str, str]:
+    """Label per method name of the rows: their `label` column (methods of one's own), else the built-in's."""
+    labels = {}
+    for method, group in rows.groupby("method", sort=False):
+        given = group["label"].dropna() if "label" in group else pd.Series(dtype=object)
+        labels[method] = str(given.iloc[0]) if len(given) else label_of(method)
+    return labels
+
+
+def _method_order(method: str) -> int:
+    """Built-ins in their registry order, other methods after them."""
+    return list(BUILTIN).index(method) if method in BUILTIN else len(BUILTIN)
 
 
 def succeeded(rows: pd.DataFrame) -> pd.Series:
@@ -113,9 +129,10 @@ def summarise(rows: pd.DataFrame) -> pd.DataFrame:
         line["runtime_rows"] = int(group._alone.sum())
         lines.append(line)
     summary = pd.DataFrame(lines)
-    order = summary.method.map(list(METHOD_LABELS).index) * 100 + summary.freq.map(FREQ_ORDER.index)
+    order = summary.method.map(_method_order) * 100 + summary.freq.map(FREQ_ORDER.index)
     summary = summary.iloc[np.argsort(order.to_numpy(), kind="stable")].reset_index(drop=True)
-    summary.insert(0, "row", [row_label(m, f) for m, f in zip(summary.method, summary.freq)])
+    labels = method_labels(rows)
+    summary.insert(0, "row", [row_label(m, f, labels[m]) for m, f in zip(summary.method, summary.freq)])
     return summary
 
 
@@ -126,14 +143,14 @@ def best_rows(summary: pd.DataFrame) -> dict[str, int]:
 
 
 def _methods_sentence(rows: pd.DataFrame) -> str:
-    parts = []
+    parts, labels = [], method_labels(rows)
     for method, group in rows.groupby("method", sort=False):
         priors = " / ".join(PRIOR_WORDS.get(p, f"prior {p}") for p in group.prior.unique())
         if method in ("2fsk", "3fsk") and set(group.prior) == {"none"}:
             priors = "the scalar prior (0.40 m by default)"
         grids = ", ".join(sorted(group.grid.unique()))
         computed = (f" (computed on grid {grids})" if grids != "from_capture" else "")
-        parts.append(f"{METHOD_LABELS[method]} with {priors}{computed}")
+        parts.append(f"{labels[method]} with {priors}{computed}")
     return "; ".join(parts)
 
 

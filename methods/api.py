@@ -1,8 +1,9 @@
 """The one entry point of the methods: `reconstruct(capture, method, freq, prior, device, grid, **params)`.
 
 It selects the configuration's frequencies from the loaded radar frame, builds the prior, checks the combination
-and runs one method. Timings exclude file I/O (the capture is already in memory) and one-time kernel
-compilation (a tiny warm-up call runs first on Warp devices).
+against what the method declares (methods.method) and runs it on the device's backend (methods.backend). Timings
+exclude file I/O (the capture is already in memory) and one-time kernel compilation (the backend's warm-up runs
+first).
 
 `roi` picks the skips (methods.skips: 'auto' = those measured to agree with the full computation, 'none' = the
 full computation of every method, 'all', or a mapping of settings) and the region of interest they use
@@ -17,23 +18,17 @@ from collections.abc import Sequence
 import numpy as np
 
 from bench.capture import Capture, RadarGrid
-from methods.bp import reconstruct_bp
 from methods.backend import Backend, backend_for
+from methods.filtering import DEFAULT_THRESHOLD_DB
 from methods.frequencies import config_indices, select_frequencies
-from methods.fsk import DEFAULT_PRIOR_M, reconstruct_2fsk
-from methods.fsk3 import reconstruct_3fsk
-from methods.mm2fsk import reconstruct_mm2fsk
+from methods.fsk import DEFAULT_PRIOR_M
+from methods.method import SENSOR_PRIORS, Frame, Method
 from methods.prior_image import Prior
 from methods.reconstruction import Reconstruction
+from methods.registry import make_method
 from methods.roi import Roi, full_roi, intersect, roi_from_mask_bb
 from methods.skips import SkipSettings, resolve
 from methods.timing import StageTimer
-
-METHODS = ("bp", "2fsk", "3fsk", "mm2fsk")
-SENSOR_PRIORS = ("realsense", "photogrammetry")
-_N_FREQS = {"2fsk": 2, "mm2fsk": 2, "3fsk": 3}
-_COMMON_PARAMS = {"threshold_db", "scalar_prior_m"}
-_PARAMS = {"bp": _COMMON_PARAMS | {"band_m"}, "2fsk": _COMMON_PARAMS, "3fsk": _COMMON_PARAMS, "mm2fsk": _COMMON_PARAMS}
 
 
 def parse_prior(prior: str | float | None) -> str | float | None:
@@ -86,26 +81,6 @@ def frequency_indices(freqs_hz: np.ndarray, freq: str | Sequence[float] | None) 
     return select_frequencies(freqs_hz, [float(f) for f in freq])
 
 
-def _check(method: str, freq: object, n_freqs: int, prior: str | float | None, params: dict) -> None:
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    needed = _N_FREQS.get(method)
-    if needed is not None and n_freqs != needed:
-        raise ValueError(f"{method} needs a {needed}-frequency configuration, but freq={freq!r} selects "
-                         f"{n_freqs} frequencies")
-    if method == "mm2fsk" and prior not in SENSOR_PRIORS:
-        raise ValueError(f"mm2fsk needs a per-pixel prior: prior='realsense' or 'photogrammetry', got {prior!r}")
-    if method in ("2fsk", "3fsk") and prior in SENSOR_PRIORS:
-        raise ValueError(f"{method} uses a scalar prior (a depth in metres, default {DEFAULT_PRIOR_M}); "
-                         f"for prior={prior!r} use method='mm2fsk'")
-    unknown = set(params) - _PARAMS[method]
-    if unknown:
-        raise ValueError(f"unknown parameter(s) {', '.join(sorted(unknown))} for {method}; "
-                         f"allowed: {', '.join(sorted(_PARAMS[method]))}")
-    if "band_m" in params and prior is None:
-        raise ValueError("band_m sets BP's search band around a prior; give a prior as well")
-
-
 def _check_frequencies_hz(capture: Capture, freqs_hz: np.ndarray) -> None:
     """Refuse a frequency vector that is not finite or not in Hz (e.g. in GHz)."""
     if freqs_hz.size == 0:
@@ -134,23 +109,26 @@ def capture_roi(capture: Capture, grid: RadarGrid, skips: SkipSettings) -> Roi:
     return roi
 
 
-def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | None,
-                prior: str | float | None = "none", device: str = "cpu", grid: RadarGrid | None = None,
-                roi: str | dict | SkipSettings | None = "auto", **params) -> Reconstruction:
-    """Depth map of the capture's loaded radar frame with `method` (bp | 2fsk | 3fsk | mm2fsk).
+def reconstruct(capture: Capture, method: str | type | Method, freq: str | Sequence[float] | None,
+                prior: str | float | None = "none", device: str | Backend = "cpu", grid: RadarGrid | None = None,
+                roi: str | dict | SkipSettings | None = "auto", threshold_db: float | None = DEFAULT_THRESHOLD_DB,
+                scalar_prior_m: float = DEFAULT_PRIOR_M, **params) -> Reconstruction:
+    """Depth map of the capture's loaded radar frame with `method`: a built-in name (bp | 2fsk | 3fsk | mm2fsk |
+    mm3fsk), a dotted class path, a `methods.method.Method` subclass or instance (methods.registry).
 
     freq: a configuration name of `methods.frequencies` (d05 ... d10, full, d05_d10, d1_d10, d2_d10), a list of
     target frequencies in GHz (nearest present ones are used), or None for all frequencies.
-    prior: 'none', 'realsense', 'photogrammetry' (MM-2FSK; BP searches a band around it), or a scalar depth in
-    metres (2FSK/3FSK start from it; BP searches a band around it). grid: overrides the frame's grid.
-    roi: the skips and region of interest (module doc; 'none' = the full computation).
-    params: threshold_db (filter, dB below the maximum, default 14; None = off); scalar_prior_m (the scalar
-    prior of 2FSK/3FSK when prior='none', default 0.40 m; other methods ignore it); band_m (BP with a prior).
+    prior: 'none', 'realsense', 'photogrammetry', or a scalar depth in metres; a method that needs a scalar prior
+    gets `scalar_prior_m` (default 0.40 m) for 'none'. grid: overrides the frame's grid.
+    roi: the skips and region of interest (module doc; 'none' = the full computation). threshold_db: the depth
+    filter, dB below the strongest pixel (default 14; None = off). params: the method's own parameters (its
+    `params`; e.g. band_m for BP with a prior).
     A sensor prior that covers no radar pixel (empty mask, object outside the grid) gives an explicit all-invalid
-    result: every depth NaN and `extra["invalid_reason"]` saying why; so does a frame without signal (all
-    zero). `invalid_reason` is None when some pixel is valid. A frame with NaN/Inf
-    samples or frequencies not in Hz raises ValueError.
+    result: every depth NaN and `invalid_reason` saying why; so does a frame without signal (all zero).
+    `invalid_reason` is None when some pixel is valid. A frame with NaN/Inf samples or frequencies not in Hz, and
+    a combination the method does not accept (methods.method.MethodError), raise ValueError.
     """
+    method = make_method(method, params)
     frame = capture.radar
     if frame is None:
         raise ValueError(f"capture {capture.name} has no radar frame loaded")
@@ -158,40 +136,32 @@ def reconstruct(capture: Capture, method: str, freq: str | Sequence[float] | Non
     indices = frequency_indices(frame.freqs_hz, freq)
     prior_value = parse_prior(prior)
     invalid_reason = None
-    _check(method, freq, len(indices), prior_value, params)
-    skips = resolve(roi, method, len(indices))
+    method.check(len(indices), freq, prior_value)
     backend = backend_for(device)
+    skips = resolve(roi, method.name, len(indices), backend.name)
     grid = grid or frame.grid
     signal = np.ascontiguousarray(frame.signal[:, :, indices])
     _check_signal(capture, signal)
     freqs_hz = frame.freqs_hz[indices]
-    backend.warm_up(signal, freqs_hz, capture.antennas.tx_m, capture.antennas.rx_m, volume=method == "bp",
-                    prior=method == "mm2fsk")
-
-    scalar_prior_m = float(params.pop("scalar_prior_m", DEFAULT_PRIOR_M))
-    timer = StageTimer()
     antennas = capture.antennas
+    backend.warm_up(signal, freqs_hz, antennas.tx_m, antennas.rx_m, volume=method.uses_volume,
+                    prior=method.device_prior)
+
+    timer = StageTimer()
     region = capture_roi(capture, grid, skips)
     if prior_value in SENSOR_PRIORS:
         with timer.stage("prior"):
-            sensor_prior = prior_image_m(capture, prior_value, grid, backend, keep_on_device=method == "mm2fsk")
-        # an explicit all-invalid result (extra["invalid_reason"]) below
-        if not sensor_prior.n_covered:
+            run_prior = prior_image_m(capture, prior_value, grid, backend, keep_on_device=method.device_prior)
+        if not run_prior.n_covered:          # an explicit all-invalid result (invalid_reason) below
             invalid_reason = f"the {prior_value} prior of capture {capture.name} covers no radar pixel"
-        prior_m = sensor_prior.host_m() if method == "bp" else sensor_prior
+    elif prior_value is None and "none" not in method.priors:
+        run_prior = scalar_prior_m          # a method of scalar priors starts from the default one
     else:
-        prior_m = prior_value
-    if method == "bp":
-        result = reconstruct_bp(signal, freqs_hz, antennas, grid, prior_m=prior_m, backend=backend, timer=timer,
-                                roi=region, skips=skips, **params)
-    elif method == "mm2fsk":
-        result = reconstruct_mm2fsk(signal, freqs_hz, antennas, grid, prior_m, backend=backend, timer=timer,
-                                    roi=region, **params)
-    else:
-        run = reconstruct_2fsk if method == "2fsk" else reconstruct_3fsk
-        result = run(signal, freqs_hz, antennas, grid, prior_m=scalar_prior_m if prior_m is None else prior_m,
-                     backend=backend, roi=region, skips=skips, **params)
+        run_prior = prior_value
+    result = method.run(Frame(signal, freqs_hz, antennas, grid, region, skips, threshold_db, capture.name),
+                        run_prior, backend, timer)
     if invalid_reason is None and not result.valid.any():
         invalid_reason = "no pixel has a nonzero magnitude within the filter threshold (a frame without signal?)"
-    result.extra.update(freq=freq, prior=prior, device=backend.name, invalid_reason=invalid_reason)
+    result.extra.update(freq=freq, prior=prior)
+    result.device, result.invalid_reason = backend.name, invalid_reason
     return result

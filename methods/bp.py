@@ -25,6 +25,8 @@ from methods import bp_search, range_cpu
 from methods.backend import Backend, backend_for
 from methods.depth_peak import peak_depth_m
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
+from methods.method import Frame, Method, MethodError
+from methods.prior_image import Prior
 from methods.reconstruction import Reconstruction
 from methods.roi import Roi, full_roi, intersect, pixel_pitch_m
 from methods.skips import NONE, SkipSettings
@@ -192,3 +194,25 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
         depth_m = filter_depth(depth_m, max_proj, threshold_db)
     return Reconstruction(depth_m=depth_m, magnitude=max_proj, freqs_hz=np.asarray(freqs_hz),
                           timings_ms=timer.finish(), grid=grid, method="bp", extra=extra)
+
+
+class BP(Method):
+    """Back-projection (module doc): BP over any frequencies; BP_max with all of them (`freq=full`)."""
+
+    name = "bp"
+    label = "BP"
+    n_freqs = None
+    priors = ("none", "scalar", "realsense", "photogrammetry")
+    params = {"band_m": DEFAULT_BAND_M}
+    uses_volume = True
+
+    def check(self, n_freqs: int, freq: object, prior: str | float | None) -> None:
+        super().check(n_freqs, freq, prior)
+        if "band_m" in self.given and prior is None:
+            raise MethodError("band_m sets BP's search band around a prior; give a prior as well")
+
+    def run(self, frame: Frame, prior: Prior | float | None, backend: Backend, timer: StageTimer) -> Reconstruction:
+        prior_m = prior.host_m() if isinstance(prior, Prior) else prior
+        return reconstruct_bp(frame.signal, frame.freqs_hz, frame.antennas, frame.grid, prior_m=prior_m,
+                              band_m=self.values["band_m"], threshold_db=frame.threshold_db, backend=backend,
+                              timer=timer, roi=frame.roi, skips=frame.skips)

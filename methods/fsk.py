@@ -24,6 +24,7 @@ from methods.backend import Backend, backend_for
 from methods.correlate import C_M_PER_S
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
 from methods.keep_skip import run_where_kept
+from methods.method import Frame, Method
 from methods.reconstruction import Reconstruction
 from methods.roi import Roi, full_roi, pixel_pitch_m
 from methods.skips import NONE, SkipSettings
@@ -108,13 +109,13 @@ def finish(depth_m: np.ndarray, magnitude: np.ndarray, grid: RadarGrid, freqs_hz
 
 def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                     backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE
-                     ) -> Reconstruction:
+                     backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE,
+                     timer: StageTimer | None = None) -> Reconstruction:
     """2FSK depth map on `grid`'s pixels from a two-frequency frame `signal` (n_rx, n_tx, 2); `roi` (None = the
     whole grid) and `skips.fsk_keep` as in the module doc."""
     if len(freqs_hz) != 2:
         raise ValueError(f"2FSK needs exactly two frequencies, got {len(freqs_hz)}")
-    timer = StageTimer()
+    timer = timer or StageTimer()
     backend = backend_for(backend)
     roi = roi if roi is not None else full_roi(grid)
     x_img, y_img = grid.pixel_xy_m()
@@ -136,3 +137,17 @@ def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
                                        enabled=skips.fsk_keep)
     extra = {"prior_m": prior_m, **details, "roi_px": int(evaluated.sum()), "roi_sources": roi.sources}
     return finish(images["depth_m"], images["magnitude"], grid, freqs_hz, "2fsk", threshold_db, timer, extra, roi)
+
+
+class TwoFSK(Method):
+    """2FSK with a scalar prior (module doc)."""
+
+    name = "2fsk"
+    label = "2FSK"
+    n_freqs = 2
+    priors = ("scalar",)
+
+    def run(self, frame: Frame, prior: float, backend: Backend, timer: StageTimer) -> Reconstruction:
+        return reconstruct_2fsk(frame.signal, frame.freqs_hz, frame.antennas, frame.grid, prior_m=prior,
+                                threshold_db=frame.threshold_db, backend=backend, roi=frame.roi, skips=frame.skips,
+                                timer=timer)

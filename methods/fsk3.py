@@ -37,6 +37,7 @@ from methods.filtering import DEFAULT_THRESHOLD_DB
 from methods.fsk import (DEFAULT_PRIOR_M, correlate_pixels, finish, first_pass_z1_m, mean_phasor_magnitude,
                          second_pass)
 from methods.keep_skip import run_where_kept
+from methods.method import Frame, Method
 from methods.reconstruction import Reconstruction
 from methods.roi import Roi, full_roi, pixel_pitch_m
 from methods.skips import NONE, SkipSettings
@@ -57,14 +58,14 @@ def slope_correction_m(phasors: np.ndarray, freqs_hz: np.ndarray) -> np.ndarray:
 
 def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                     backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE
-                     ) -> Reconstruction:
+                     backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE,
+                     timer: StageTimer | None = None) -> Reconstruction:
     """3FSK depth map on `grid`'s pixels from a three-frequency frame `signal` (n_rx, n_tx, 3), f ascending;
     `roi` (None = the whole grid) and `skips.fsk_keep` as in the module doc."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     if len(freqs_hz) != 3 or not np.all(np.diff(freqs_hz) > 0):
         raise ValueError(f"3FSK needs three ascending frequencies, got {freqs_hz}")
-    timer = StageTimer()
+    timer = timer or StageTimer()
     backend = backend_for(backend)
     roi = roi if roi is not None else full_roi(grid)
     x_img, y_img = grid.pixel_xy_m()
@@ -95,3 +96,17 @@ def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
                                        enabled=skips.fsk_keep)
     extra.update(coarse_depth_m=images["coarse_m"], **details, roi_px=int(evaluated.sum()), roi_sources=roi.sources)
     return finish(images["depth_m"], images["magnitude"], grid, freqs_hz, "3fsk", threshold_db, timer, extra, roi)
+
+
+class ThreeFSK(Method):
+    """3FSK with a scalar prior (module doc)."""
+
+    name = "3fsk"
+    label = "3FSK"
+    n_freqs = 3
+    priors = ("scalar",)
+
+    def run(self, frame: Frame, prior: float, backend: Backend, timer: StageTimer) -> Reconstruction:
+        return reconstruct_3fsk(frame.signal, frame.freqs_hz, frame.antennas, frame.grid, prior_m=prior,
+                                threshold_db=frame.threshold_db, backend=backend, roi=frame.roi, skips=frame.skips,
+                                timer=timer)

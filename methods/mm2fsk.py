@@ -17,6 +17,7 @@ from bench.capture import RadarGrid
 from methods.backend import Backend, backend_for
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
 from methods.fsk import correlate_pixels, depth_correction_m, mean_phasor_magnitude, roi_depth_m
+from methods.method import Frame, Method
 from methods.prior_image import HostPrior, Prior
 from methods.reconstruction import Reconstruction
 from methods.roi import Roi
@@ -73,3 +74,17 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
                           timings_ms=timer.finish(), grid=grid, method="mm2fsk",
                           extra={"prior_depth_m": prior_depth_m, "prior_pixels": int(has_prior.sum()),
                                  "roi_px": int(has_prior.sum()), "roi_sources": sources})
+
+
+class MM2FSK(Method):
+    """MM-2FSK with a per-pixel sensor prior (module doc)."""
+
+    name = "mm2fsk"
+    label = "MM-2FSK"
+    n_freqs = 2
+    priors = ("realsense", "photogrammetry")
+    device_prior = True
+
+    def run(self, frame: Frame, prior: Prior, backend: Backend, timer: StageTimer) -> Reconstruction:
+        return reconstruct_mm2fsk(frame.signal, frame.freqs_hz, frame.antennas, frame.grid, prior,
+                                  threshold_db=frame.threshold_db, backend=backend, timer=timer, roi=frame.roi)

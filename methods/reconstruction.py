@@ -15,7 +15,9 @@ class Reconstruction:
     Invalid pixels are NaN: that is the one rule (the PNG writer turns NaN into 0). `magnitude` is the linear
     quantity the depth filter thresholds (mean residual phasor magnitude; max projection for BP), NaN where a
     pixel was not evaluated. `timings_ms` holds per-stage wall times (e.g. prior, correlate, depth, filter) and
-    `total`, excluding file I/O and one-time kernel compilation.
+    `total`, excluding file I/O and one-time kernel compilation. The harness sets `device` (the backend's name)
+    and `invalid_reason` (why no pixel is valid, None when some is); `extra` holds the method's own diagnostics
+    (e.g. `roi_px`, the pixels it evaluated).
     """
 
     depth_m: np.ndarray                 # (ny, nx) float64, NaN = invalid
@@ -25,6 +27,8 @@ class Reconstruction:
     grid: RadarGrid
     method: str
     extra: dict = field(default_factory=dict)
+    device: str = ""
+    invalid_reason: str | None = None
 
     @property
     def valid(self) -> np.ndarray:

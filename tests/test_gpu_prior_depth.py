@@ -125,7 +125,7 @@ def test_mm2fsk_frame_on_the_device_matches_the_cpu_path(device):
     signal, freqs = capture.radar.signal[:, :, indices], TABLE1_FREQS_HZ[indices]
     if device == "cuda":
         rec = reconstruct(capture, "mm2fsk", "d10", prior="realsense", device="cuda")
-        assert rec.extra["device"] == "cuda"
+        assert rec.device == "cuda"
     else:
         backend = backend_for(device)
         prior = realsense_prior(backend.buffers, capture.realsense, capture.transforms["realsense2radar"], grid)

@@ -88,7 +88,7 @@ def test_warp_devices_give_the_cpu_result(tilted_plate, device, method, config, 
     grid = square_grid(0.003, 7, 0.29, 0.31, 11)          # few pixels: Warp on the CPU runs on one thread
     on_cpu = reconstruct(tilted_plate, method, config, prior=prior, grid=grid)
     on_device = reconstruct(tilted_plate, method, config, prior=prior, grid=grid, device=device)
-    assert on_device.extra["device"] == device
+    assert on_device.device == device
     np.testing.assert_allclose(on_device.depth_m, on_cpu.depth_m, rtol=0, atol=2e-6)
 
 

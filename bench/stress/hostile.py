@@ -3,7 +3,7 @@
 A case mutates a private copy of one synthetic capture (or the capture once loaded), then runs the whole chain
 read -> MM-2FSK (d05, RealSense prior, a coarse 61 x 61 grid) -> ground truth -> metrics. Outcomes:
 * "error": DatasetError (its message names the file) or ValueError (a clear sentence), no traceback;
-* "all-invalid": every depth NaN, `extra["invalid_reason"]` set, metrics NaN because nothing is comparable;
+* "all-invalid": every depth NaN, `invalid_reason` set, metrics NaN because nothing is comparable;
 * "nothing-comparable": valid pixels but none a vertex of a metric triangle (e.g. a one-pixel object): NaN
   metrics by the documented rule;
 * "valid": finite metrics; "partial-nan" (some metric NaN with comparable points) and "crash" (any other
@@ -186,7 +186,7 @@ def _chain(capture_dir: Path, change: Callable[[Capture], Capture] | None) -> di
     grid = coarse_grid(capture)
     rec = reconstruct(capture, "mm2fsk", "d05", prior="realsense", grid=grid)
     metrics = _metrics(capture, rec.depth_m, grid)
-    return {"valid_px": int(rec.valid.sum()), "invalid_reason": rec.extra["invalid_reason"] or "", **metrics,
+    return {"valid_px": int(rec.valid.sum()), "invalid_reason": rec.invalid_reason or "", **metrics,
             "outcome": _outcome(int(rec.valid.sum()), metrics)}
 
 
