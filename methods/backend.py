@@ -85,7 +85,9 @@ def check_inputs(signal, freqs_hz, tx_m, rx_m):
     if signal.shape != (len(rx_m), len(tx_m), len(freqs_hz)):
         raise ValueError(f"signal must have shape (n_rx, n_tx, F) = ({len(rx_m)}, {len(tx_m)}, {len(freqs_hz)}), "
                          f"got {signal.shape}")
-    return signal.astype(np.complex64 if signal.dtype != np.complex128 else np.complex128), freqs_hz, tx_m, rx_m
+    # copy=False: a complex64 frame passes as it is (a BP_max search calls this ~10 times per frame: 9 MB each)
+    return (signal.astype(np.complex64 if signal.dtype != np.complex128 else np.complex128, copy=False), freqs_hz,
+            tx_m, rx_m)
 
 
 def grid_vectors(x_m, y_m, z_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

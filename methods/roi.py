@@ -101,4 +101,5 @@ def dilate(mask: np.ndarray, radius_px: int) -> np.ndarray:
     """`mask` grown by a square of half-width `radius_px` (a pixel within radius_px in x and in y of a True one)."""
     if radius_px <= 0 or not mask.any():
         return mask.copy()
-    return ndimage.binary_dilation(mask, structure=np.ones((2 * radius_px + 1, 2 * radius_px + 1), dtype=bool))
+    # the square is separable: a running maximum (~0.3 ms at 301 x 301) instead of binary_dilation (~20 ms for r = 6)
+    return ndimage.maximum_filter(mask.astype(np.uint8), size=2 * radius_px + 1, mode="constant", cval=0) > 0

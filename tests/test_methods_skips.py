@@ -19,7 +19,7 @@ from methods.filtering import filter_depth
 from methods.fsk import correlate_pixels, depth_correction_m, mean_phasor_magnitude, two_pass_depth_m
 from methods.fsk3 import slope_correction_m
 from methods.range_cpu import correlate_range, path_bounds_m, range_table
-from methods.roi import full_roi, roi_from_mask_bb
+from methods.roi import dilate, full_roi, roi_from_mask_bb
 from methods.skips import ALL, NONE, SkipSettings, default_for, resolve
 from methods_scenes import ANTENNAS, MAROON_FREQS_HZ, TABLE1_FREQS_HZ, add_noise, make_capture, plate_points_m, simulate
 
@@ -74,6 +74,17 @@ def test_roi_none_is_todays_2fsk_and_3fsk(scene):
     depth3 = (coarse_m - slope_correction_m(fine, f3)).reshape(GRID.image_shape)
     rec3 = reconstruct(scene, "3fsk", "d05_d10", roi="none")
     same(rec3.depth_m, filter_depth(depth3, mean_phasor_magnitude(fine).reshape(GRID.image_shape)))
+
+
+def test_dilate_is_the_binary_dilation_by_the_square():
+    from scipy import ndimage
+    rng = np.random.default_rng()
+    for _ in range(20):
+        mask = rng.random((int(rng.integers(1, 80)), int(rng.integers(1, 80)))) < rng.uniform(0, 0.05)
+        radius = int(rng.integers(0, 7))
+        square = np.ones((2 * radius + 1, 2 * radius + 1), dtype=bool)
+        expected = ndimage.binary_dilation(mask, structure=square) if mask.any() else mask
+        assert np.array_equal(dilate(mask, radius), expected)
 
 
 def test_roi_settings():

@@ -10,7 +10,7 @@ import warp as wp
 
 from methods import range_compression
 from methods.warp_backend import correlation_kernels as kernels
-from methods.warp_backend.frames import C_M_PER_S, BufferPool, FrameCache, FrameInputs, vec2_of
+from methods.warp_backend.frames import C_M_PER_S, BufferPool, FrameCache, FrameInputs
 
 KERNELS = ("tc", "separable", "direct", "range")
 
@@ -39,12 +39,7 @@ def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box
     dev = inputs.device
     n_freqs, n_rx, n_tx_pad = inputs.signal_padded.shape
     m0, n_window = range_compression.sample_window(rplan, *path_window_m(inputs.tx_m, inputs.rx_m, *box_m))
-    sig_pairs = inputs.signal_padded.numpy().reshape(n_freqs, n_rx * n_tx_pad, 2).transpose(1, 0, 2)
-    sig = wp.array(np.ascontiguousarray(sig_pairs), dtype=wp.vec2f, device=dev)
-    m = np.arange(rplan.n_samples)
-    twiddle = wp.array(vec2_of(np.exp(2j * np.pi * m / rplan.n_samples)), dtype=wp.vec2f, device=dev)
-    shift = wp.array(vec2_of(range_compression.profile_shift(rplan)), dtype=wp.vec2f, device=dev)
-    index = wp.array(rplan.grid_index.astype(np.int32), dtype=wp.int32, device=dev)
+    sig, twiddle, shift, index = inputs.range_tables(rplan)
     profiles = wp.empty((n_rx * n_tx_pad, n_window), dtype=wp.vec2h, device=dev)
     k_c = 2 * np.pi * rplan.f_carrier_hz / C_M_PER_S
     gather_args = [flag, points, x, y, z, inputs.rx, inputs.tx_padded, wp.float32(k_c),

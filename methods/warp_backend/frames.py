@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from methods import range_compression
 from methods.warp_backend.correlation_kernels import MAX_ANTENNAS, TC2_HALF, TC2_PAD, TC_ANT, TX_CHUNK
 
 C_M_PER_S = 299_792_458.0
@@ -64,6 +65,20 @@ class FrameInputs:
         return self._get("tx_padded", lambda: wp.array(
             np.pad(self.tx_m, ((0, self._n_pad()), (0, 0)), mode="edge").astype(np.float32), dtype=wp.vec3f,
             device=self.device))
+
+    def range_tables(self, rplan):
+        """(signal pair-major (R * T_padded, F) vec2f, twiddles, profile shift, frequency grid indices) of the
+        range-compressed gather, built once per frame (a search calls the gather many times on one frame)."""
+        def build():
+            n_freqs, n_rx, n_tx_pad = self.signal_padded.shape
+            sig_pairs = self.signal_padded.numpy().reshape(n_freqs, n_rx * n_tx_pad, 2).transpose(1, 0, 2)
+            m = np.arange(rplan.n_samples)
+            dev = self.device
+            return (wp.array(np.ascontiguousarray(sig_pairs), dtype=wp.vec2f, device=dev),
+                    wp.array(vec2_of(np.exp(2j * np.pi * m / rplan.n_samples)), dtype=wp.vec2f, device=dev),
+                    wp.array(vec2_of(range_compression.profile_shift(rplan)), dtype=wp.vec2f, device=dev),
+                    wp.array(rplan.grid_index.astype(np.int32), dtype=wp.int32, device=dev))
+        return self._get(("range", rplan.n_samples, rplan.f_carrier_hz), build)
 
     def tile_tables(self):
         """(rx4, tx4, gain, mat): padded antennas, per-frequency gain and fp16 [[Sr, Si], [-Si, Sr]] / gain."""
