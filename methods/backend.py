@@ -112,6 +112,11 @@ class Backend:
         """complex64 (N,) phasors summed over frequencies."""
         raise NotImplementedError
 
+    def summed_at_points(self, signal, freqs_hz, tx_m, rx_m):
+        """Function points_m (N, 3) -> `correlate_summed` there, for many calls on one frame (BP's depth search):
+        a backend may prepare the frame's inputs once."""
+        return lambda points_m: self.correlate_summed(signal, freqs_hz, tx_m, rx_m, points_m)
+
     def volume(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, method: str = "auto") -> np.ndarray:
         """complex64 (nz, ny, nx) frequency-summed phasors on the grid (axes in the order the vectors are given)."""
         raise NotImplementedError

@@ -69,7 +69,7 @@ def _evaluator(signal, freqs_hz, antennas, backend: Backend, use_range, points_h
         table = range_cpu.range_table(signal, freqs_hz, *range_cpu.path_bounds_m(antennas.tx_m, antennas.rx_m,
                                                                                  points_hull_m))
         return lambda points_m: range_cpu.correlate_range_cpu(table, antennas.tx_m, antennas.rx_m, points_m)
-    return lambda points_m: backend.correlate_summed(signal, freqs_hz, antennas.tx_m, antennas.rx_m, points_m)
+    return backend.summed_at_points(signal, freqs_hz, antennas.tx_m, antennas.rx_m)
 
 
 def _box_corners_m(x_m, y_m, z_m) -> np.ndarray:

@@ -36,3 +36,20 @@ def test_range_gather_at_points_matches_the_float64_sum_and_the_volume(device):
     at_voxels = backend.correlate_summed(signal, freqs_hz, ANT.tx_m, ANT.rx_m,
                                          np.column_stack([xx.ravel(), yy.ravel(), zz.ravel()]))
     assert np.array_equal(at_voxels, volume.ravel())
+
+
+@pytest.mark.parametrize("device", ["cpu", "warp-cpu", CUDA])
+def test_summed_at_points_is_correlate_summed_on_one_frame(device):
+    from methods.backend import backend_for
+
+    backend = backend_for(device)
+    rng = np.random.default_rng()
+    for freqs_hz in (ALL_FREQS_HZ[[3, 90]], ALL_FREQS_HZ[::6]):          # two frequencies; many (range on Warp)
+        signal = (rng.standard_normal((94, 94, len(freqs_hz)))
+                  + 1j * rng.standard_normal((94, 94, len(freqs_hz)))).astype(np.complex64)
+        evaluate = backend.summed_at_points(signal, freqs_hz, ANT.tx_m, ANT.rx_m)
+        for n in (5, 9):
+            points_m = np.column_stack([rng.uniform(-0.1, 0.1, n), rng.uniform(-0.1, 0.1, n),
+                                        rng.uniform(0.25, 0.4, n)])
+            expected = backend.correlate_summed(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m)
+            assert np.array_equal(evaluate(points_m), expected)

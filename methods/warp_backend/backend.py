@@ -52,6 +52,20 @@ class WarpBackend(Backend):
             kernel = self._volume_kernel(np.asarray(freqs_hz, dtype=np.float64), "auto")
         return self._points(signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs=True)[0]
 
+    def summed_at_points(self, signal, freqs_hz, tx_m, rx_m):
+        """As `correlate_summed` (default kernel) for many calls on one frame: the frame's inputs are looked up once
+        (the cache's exact comparison of a 128-frequency frame costs ~3 ms per call on the H100's host)."""
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        inputs = self.frames.inputs(signal, freqs_hz, tx_m, rx_m)
+        kernel = self._volume_kernel(freqs_hz, "auto")
+
+        def run(points_m):
+            points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+            launch = correlation.make_launch(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, kernel=kernel,
+                                             points_m=points_m, sum_freqs=True, reuse=True, inputs=inputs)
+            return correlation.to_complex(launch())[0]
+        return run
+
     def _points(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs):
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)

@@ -55,7 +55,8 @@ def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box
 
 
 def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m, rx_m, *, kernel: str,
-                points_m=None, grid_m=None, sum_freqs: bool = False, reuse: bool = False):
+                points_m=None, grid_m=None, sum_freqs: bool = False, reuse: bool = False,
+                inputs: FrameInputs | None = None):
     """Upload inputs once; return a function that runs `kernel` and returns the device output (rows, N) vec2f.
 
     kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct" or "range" (frequency sum only; the
@@ -64,8 +65,9 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
     `grid_m` = (x_m, y_m, z_m); with a grid the output is summed over frequencies, flat in (z, y, x) order.
     Frame inputs are cached by content; with `reuse` the output and work buffers are pre-allocated ones shared
     between calls (the API copies the output back before returning). The benchmark times the returned function.
+    `inputs`: the frame's FrameInputs when the caller already holds them (no cache lookup: a search on one frame).
     """
-    inputs = frames.inputs(signal, freqs_hz, tx_m, rx_m)
+    inputs = inputs or frames.inputs(signal, freqs_hz, tx_m, rx_m)
     dev = inputs.device
     empty = wp.empty(0, dtype=wp.float64, device=dev)
     if kernel == "range" and grid_m is None:           # the profile window needs the points' box on the host
