@@ -37,7 +37,7 @@ def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box
         raise ValueError("range compression needs >= 2 distinct frequencies on an equidistant grid "
                          f"with df < c / {range_compression.MAX_PATH_M} m")
     dev = inputs.device
-    n_freqs, n_rx, n_tx_pad = inputs.signal_padded.shape
+    n_rx, n_tx_pad = len(inputs.rx_m), len(inputs.tx_m) + inputs.n_tx_pad
     m0, n_window = range_compression.sample_window(rplan, *path_window_m(inputs.tx_m, inputs.rx_m, *box_m))
     sig, twiddle, shift, index = inputs.range_tables(rplan)
     profiles = wp.empty((n_rx * n_tx_pad, n_window), dtype=wp.vec2h, device=dev)

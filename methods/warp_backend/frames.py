@@ -52,26 +52,28 @@ class FrameInputs:
     def signal(self):
         return self._get("signal", lambda: wp.array(vec2_of(self.sig), dtype=wp.vec2f, device=self.device))
 
-    def _n_pad(self):
+    @property
+    def n_tx_pad(self) -> int:
+        """Tx rows appended (zero signal) to make the Tx count a multiple of TX_CHUNK."""
         return -len(self.tx_m) % int(TX_CHUNK)
 
     @property
     def signal_padded(self):
         return self._get("signal_padded", lambda: wp.array(
-            vec2_of(np.pad(self.sig, ((0, 0), (0, 0), (0, self._n_pad())))), dtype=wp.vec2f, device=self.device))
+            vec2_of(np.pad(self.sig, ((0, 0), (0, 0), (0, self.n_tx_pad)))), dtype=wp.vec2f, device=self.device))
 
     @property
     def tx_padded(self):
         return self._get("tx_padded", lambda: wp.array(
-            np.pad(self.tx_m, ((0, self._n_pad()), (0, 0)), mode="edge").astype(np.float32), dtype=wp.vec3f,
+            np.pad(self.tx_m, ((0, self.n_tx_pad), (0, 0)), mode="edge").astype(np.float32), dtype=wp.vec3f,
             device=self.device))
 
     def range_tables(self, rplan):
         """(signal pair-major (R * T_padded, F) vec2f, twiddles, profile shift, frequency grid indices) of the
         range-compressed gather, built once per frame (a search calls the gather many times on one frame)."""
         def build():
-            n_freqs, n_rx, n_tx_pad = self.signal_padded.shape
-            sig_pairs = self.signal_padded.numpy().reshape(n_freqs, n_rx * n_tx_pad, 2).transpose(1, 0, 2)
+            padded = np.pad(self.sig, ((0, 0), (0, 0), (0, self.n_tx_pad)))         # (F, R, T_padded), host
+            sig_pairs = vec2_of(padded.reshape(self.n_freqs, -1).T)                 # as signal_padded, pair-major
             m = np.arange(rplan.n_samples)
             dev = self.device
             return (wp.array(np.ascontiguousarray(sig_pairs), dtype=wp.vec2f, device=dev),
