@@ -91,7 +91,7 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
             raise ValueError("the range kernel gives the frequency sum only (sum_freqs=True)")
         return _range_launch(inputs, freqs_hz, flag, points, x, y, z, out, box_m)
     if kernel == "tc":
-        rx4, tx4, gain, mat = inputs.tile_tables()
+        rx4, tx4, gain, mat = inputs.tile_tables(with_mat=wp.get_device(dev).is_cpu)
         if reuse:
             pts = buffers.get("pts", n_out, wp.vec4f)
             common = buffers.get("common", (inputs.n_freqs, n_out), wp.vec2f)

@@ -82,8 +82,8 @@ class FrameInputs:
                     wp.array(rplan.grid_index.astype(np.int32), dtype=wp.int32, device=dev))
         return self._get(("range", rplan.n_samples, rplan.f_carrier_hz), build)
 
-    def tile_tables(self):
-        """(rx4, tx4, gain, mat): padded antennas, per-frequency gain and fp16 [[Sr, Si], [-Si, Sr]] / gain."""
+    def _host_mat(self):
+        """(gain (F,) float64, fp16 [[Sr, Si], [-Si, Sr]] / gain (F, 192, 192)) on the host, once per frame."""
         def build():
             n = int(TC_ANT)
             n_rx, n_tx = self.sig.shape[1:]
@@ -92,19 +92,30 @@ class FrameInputs:
             gain = np.maximum(np.abs(sig.real).max(axis=(1, 2)), np.abs(sig.imag).max(axis=(1, 2)))
             gain = np.where(gain > 0, gain, 1.0)
             sig /= gain[:, None, None]
-            mat = np.block([[sig.real, sig.imag], [-sig.imag, sig.real]]).astype(np.float16)
+            return gain, np.block([[sig.real, sig.imag], [-sig.imag, sig.real]]).astype(np.float16)
+        return self._get("host_mat", build)
+
+    def tile_tables(self, with_mat: bool = True):
+        """(rx4, tx4, gain, mat): padded antennas, per-frequency gain and fp16 [[Sr, Si], [-Si, Sr]] / gain; `mat`
+        (F, 192, 192) is uploaded only `with_mat` (Warp-CPU's kernel; CUDA's reads `tx_half_tables`), else None."""
+        def build():
+            n = int(TC_ANT)
             dev = self.device
             return (wp.array(antennas4(self.rx_m, n), dtype=wp.vec4f, device=dev),
                     wp.array(antennas4(self.tx_m, n), dtype=wp.vec4f, device=dev),
-                    wp.array(gain.astype(np.float32), dtype=wp.float32, device=dev),
-                    wp.array(np.ascontiguousarray(mat), dtype=wp.float16, device=dev))
-        return self._get("tc", build)
+                    wp.array(self._host_mat()[0].astype(np.float32), dtype=wp.float32, device=dev))
+        mat = None
+        if with_mat:
+            mat = self._get("tc_mat", lambda: wp.array(np.ascontiguousarray(self._host_mat()[1]), dtype=wp.float16,
+                                                       device=self.device))
+        return (*self._get("tc", build), mat)
 
     def tx_half_tables(self):
         """(F, 2, 96, TC2_KP) fp16: per Tx half h the rows [M[:, h*48 + j] ; M[:, 96 + h*48 + j]] of M^T, with
-        TC2_PAD zero columns appended (the operand of `correlate_tiles_tx_halves`)."""
+        TC2_PAD zero columns appended (the operand of `correlate_tiles_tx_halves`), from the host matrix (no
+        copy back of the device one)."""
         def build():
-            mat = self.tile_tables()[3].numpy().astype(np.float16)           # (F, 192, 192)
+            mat = self._host_mat()[1]                                         # (F, 192, 192)
             n, hh = int(TC_ANT), int(TC2_HALF)
             halves = [np.concatenate([mat[:, :, h * hh:(h + 1) * hh], mat[:, :, n + h * hh:n + (h + 1) * hh]],
                                      axis=2).transpose(0, 2, 1) for h in range(2)]
