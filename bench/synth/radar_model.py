@@ -8,6 +8,8 @@ phasors advance by one complex64 multiply per step and are re-formed exactly eve
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from threadpoolctl import threadpool_limits
 
@@ -15,7 +17,9 @@ from bench.synth.config import C_M_PER_S, SynthConfig
 from bench.synth.sampling import SurfaceSamples
 
 RESEED_STEPS = 16       # exact phasors every 16 frequencies bound the complex64 recursion error to ~1e-6
-CHUNK_POINTS = 4096     # scatterers per block (bounds memory to ~100 MB)
+CHUNK_POINTS = 4096     # scatterers per block (bounds memory to ~100 MB per thread)
+PARTIAL_SUMS = 2        # blocks alternate between two sums, one thread each: fixed, so results do not depend on
+                        # the machine (the order of float32 additions is always the same)
 
 
 def _exact_phasors(path_m: np.ndarray, freq_hz: float) -> np.ndarray:
@@ -43,14 +47,22 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
     amplitudes = np.asarray(amplitudes, dtype=np.complex128).reshape(-1)
     tx_m, rx_m = np.asarray(tx_m, dtype=np.float64), np.asarray(rx_m, dtype=np.float64)
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
-    out = np.zeros((len(freqs_hz), len(rx_m), len(tx_m)), dtype=np.complex64)
-    # numpy's OpenBLAS workers busy-wait: on shared cores these many small (96 x K) @ (K x 96) products run
-    # 2-6x faster single-threaded (measured)
-    with threadpool_limits(limits=1, user_api="blas"):
-        for start in range(0, len(points_m), CHUNK_POINTS):
+    outs = [np.zeros((len(freqs_hz), len(rx_m), len(tx_m)), dtype=np.complex64) for _ in range(PARTIAL_SUMS)]
+    starts = range(0, len(points_m), CHUNK_POINTS)
+
+    def accumulate(k: int) -> None:
+        for start in starts[k::PARTIAL_SUMS]:
             chunk = slice(start, start + CHUNK_POINTS)
             lobe = None if normals is None else (normals[chunk], lobe_rad[chunk])
-            _accumulate(out, points_m[chunk], amplitudes[chunk], rx_m, tx_m, freqs_hz, lobe, element_exponent)
+            _accumulate(outs[k], points_m[chunk], amplitudes[chunk], rx_m, tx_m, freqs_hz, lobe, element_exponent)
+
+    # numpy's OpenBLAS workers busy-wait: on shared cores these many small (96 x K) @ (K x 96) products run
+    # 2-6x faster single-threaded (measured); two Python threads (numpy releases the GIL) use both cores instead
+    with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(PARTIAL_SUMS) as pool:
+        list(pool.map(accumulate, range(PARTIAL_SUMS)))
+    out = outs[0]
+    for other in outs[1:]:
+        out += other
     return np.ascontiguousarray(out.transpose(1, 2, 0))
 
 
