@@ -33,7 +33,8 @@ GROUP_COLUMNS = ["method", "freq", "prior", "grid"]
 CAPTURE_COLUMNS = ["object", "distance", "frame"]
 PER_CAPTURE = ["object", "distance"]           # frames of a capture are averaged first, then the captures
 FREQ_ORDER = ["full", *(name for name in CONFIGS_GHZ if name != "full")]       # BP_max first, as in the paper
-TITLES = {"table2": "Table II", "table3": "Table III", "runtime": "Runtime and error"}
+TITLES = {"table2": "Table II", "table3": "Table III", "beyond": "Table III extended (MM-3FSK, prior only)",
+          "runtime": "Runtime and error"}
 PRIOR_WORDS = {"photogrammetry": "the photogrammetry (ground-truth) prior", "realsense": "the RealSense prior",
                "none": "no per-pixel prior"}
 NOT_COMPARABLE = "†"

@@ -51,6 +51,13 @@ README_RUNS: dict[str, list[str]] = {
     ".venv/bin/python -m bench -m experiment=table3 hydra/launcher=local":
         ["{py} -m bench experiment=table3 hydra/launcher=local --cfg all"],
     ".venv/bin/python -m bench -m experiment=runtime": ["{py} -m bench experiment=runtime --cfg all"],
+    ".venv/bin/python -m bench -m experiment=beyond hydra/launcher=local":
+        ["{py} -m bench experiment=beyond hydra/launcher=local --cfg all"],
+    # a method of one's own, for real on one capture (the worked example: no radar, seconds)
+    ".venv/bin/python -m bench method=custom method._target_=examples.prior_only.PriorOnly prior=realsense freq=d10":
+        ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=custom "
+         "method._target_=examples.prior_only.PriorOnly prior=realsense freq=d10 store.dir=null "
+         "hydra.run.dir={tmp}/own", "test -s {tmp}/own/results.csv"],
     ".venv/bin/python -m bench -m experiment=table3 hydra/launcher=slurm hydra.launcher.partition=gpu device=cuda "
     "grid=paper": ["{py} -m bench experiment=table3 hydra/launcher=slurm hydra.launcher.partition=gpu device=cuda "
                    "grid=paper --cfg all"],
