@@ -9,7 +9,7 @@ the result store first (bench.store) and only missing cells are computed. Multir
 from __future__ import annotations
 
 import collections
-import functools
+import dataclasses
 import hashlib
 import inspect
 import logging
@@ -98,11 +98,35 @@ def _antenna_files(cfg: DictConfig) -> tuple[str | None, str | None]:
     return tuple(None if f is None else to_absolute_path(str(f)) for f in (files.tx_file, files.rx_file))
 
 
-@functools.lru_cache(maxsize=16)   # a joblib worker runs many cells on the same captures
+_CAPTURES: collections.OrderedDict = collections.OrderedDict()   # (frame key) -> (Capture, parts read)
+CAPTURES_KEPT = 16
+
+
 def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
                   antenna_files: tuple[str | None, str | None]) -> Capture:
-    return maroon.read_capture(capture_dir, frame=frame, parts=parts, empty_filtered=empty_filtered,
-                               antennas=load_antenna_array(*antenna_files))
+    """The capture frame with `parts`, each part read once per process: a worker (or the basic launcher's one
+    process) runs many cells on the same captures, BP needing radar and mesh and MM-2FSK the RealSense frame too,
+    so a later cell reads only the parts no earlier cell read (the RealSense frame paired with the cached radar
+    frame's time, as read_capture pairs it)."""
+    key = (capture_dir, frame, empty_filtered, antenna_files)
+    cached, have = _CAPTURES.pop(key, (None, ()))
+    missing = tuple(part for part in parts if part not in have)
+    if missing:
+        paired = None
+        if "realsense" in missing and cached is not None and cached.radar is not None \
+                and (capture_dir / "realsense").is_dir():
+            paired = maroon.realsense_pairing(capture_dir / "realsense", cached.radar.timestamp_s).realsense_frame
+        new = maroon.read_capture(capture_dir, frame=frame, parts=missing, empty_filtered=empty_filtered,
+                                  antennas=load_antenna_array(*antenna_files), realsense_frame=paired)
+        if cached is not None:
+            new = dataclasses.replace(cached, notes=cached.notes + new.notes,
+                                      transforms=new.transforms if "mesh" in missing else cached.transforms,
+                                      **{part: getattr(new, part) for part in missing})
+        cached, have = new, have + missing
+    _CAPTURES[key] = (cached, have)
+    while len(_CAPTURES) > CAPTURES_KEPT:
+        _CAPTURES.popitem(last=False)
+    return dataclasses.replace(cached, **{part: None for part in maroon.PARTS if part not in parts})
 
 
 def _frames(capture_dir: Path, spec) -> list[int]:

@@ -15,3 +15,25 @@ def test_later_cells_reuse_the_read_captures_and_ground_truth(synth_root, tmp_pa
         assert abs(sum(row[f"{s}_s"] for s in STAGES) + row["other_s"] - row["wall_s"]) < 1e-9
         assert 0 <= row["other_s"] < 0.5 * row["wall_s"]
     assert total["cell"] == "total" and total["frames"] == 2
+
+
+def test_a_capture_part_is_read_once_per_process(synth_root, monkeypatch):
+    """BP's cell reads radar and mesh, MM-2FSK's then only the RealSense frame (paired like read_capture pairs)."""
+    import numpy as np
+
+    from bench import app, maroon
+
+    asked = []
+    read = maroon.read_capture
+    monkeypatch.setattr(maroon, "read_capture", lambda *a, **k: asked.append(k["parts"]) or read(*a, **k))
+    monkeypatch.setattr(app, "_CAPTURES", type(app._CAPTURES)())
+    capture_dir = synth_root / "01_plate" / "30"
+    first = app._read_capture(capture_dir, -1, ("radar", "mesh"), False, (None, None))
+    both = app._read_capture(capture_dir, -1, ("radar", "mesh", "realsense"), False, (None, None))
+    again = app._read_capture(capture_dir, -1, ("radar", "mesh"), False, (None, None))
+    assert asked == [("radar", "mesh"), ("realsense",)]
+    assert first.realsense is None and again.realsense is None and both.radar is first.radar
+    direct = read(capture_dir, parts=("radar", "mesh", "realsense"))
+    assert both.realsense.index == direct.realsense.index
+    np.testing.assert_array_equal(both.realsense.depth_mm, direct.realsense.depth_mm)
+    np.testing.assert_array_equal(both.transforms["photogrammetry2radar"], direct.transforms["photogrammetry2radar"])
