@@ -49,7 +49,8 @@ case "${1:-}" in
     noise='^Module|^Warp|CUDA Toolkit|Devices:|"cpu"|"cuda:0"|Kernel cache'
     nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee "$out/device.txt"
     python3 -m pytest -q -p no:cacheprovider -m cuda tests/test_gpu_hull_fill.py tests/test_gpu_range_points.py \
-      tests/test_gpu_prior_depth.py tests/test_correlate.py tests/test_methods_api.py 2>&1 | tail -5 | tee "$out/tests.log"
+      tests/test_gpu_prior_depth.py tests/test_correlate.py tests/test_methods_api.py 2>&1 | tail -5 | tee "$out/tests.log" \
+      || true                                                # a failing test is reported; the figures still run
     python3 -m bench.perf_skips_gpu --root /root/data --device cuda --repeat "${REPEAT:-5}" --out "$out" 2>&1 \
       | grep -Ev "$noise" | tee "$out/perf_skips_gpu.log" ;;
   *)

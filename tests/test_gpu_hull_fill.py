@@ -45,7 +45,8 @@ def test_device_hull_fill_equals_the_cpu_fill(device):
         got[got >= FAR_M] = np.nan
         assert np.array_equal(np.isfinite(got), np.isfinite(expected)), shape
         assert added == int(np.isfinite(expected).sum() - np.isfinite(image).sum())
-        assert np.array_equal(got[np.isfinite(got)], expected[np.isfinite(expected)]), shape
+        # bit-equal on Warp-CPU; CUDA contracts the plane evaluation to FMAs (a few ulp of ~0.3 m)
+        assert np.max(np.abs(got - expected), where=np.isfinite(expected), initial=0.0) < 1e-12, shape
 
 
 @pytest.mark.parametrize("device", DEVICES)
