@@ -7,9 +7,10 @@ whole `methods.reconstruct` call (result back on the host) with `roi=auto` (the 
 (today's full computation), interleaved in one process. Every timed call gets a frame the process has not seen:
 the radar samples rotated by a random phase (|signal| and every depth unchanged) and the depth image shifted by
 1 mm (every valid pixel + 1 unit), so no content cache can hit. One untimed call per case and capture comes first
-(compilation). Printed and written per case and variant: median and 90th percentile over all frames (ms), the
-median of each stage, and for `auto` the share of the pixels valid in both maps whose depths agree within 0.1 mm
-(worst capture). Writes OUT/perf_skips_gpu_<device>.csv (OUT = `--out`, default outputs/perf/).
+(compilation; there both variants see the same frame, for the agreement). Printed and written per case and
+variant: median and 90th percentile over all frames (ms), the median of each stage, and for `auto` the share of the
+pixels valid in both maps whose depths agree within 0.1 mm (worst capture). Writes OUT/perf_skips_gpu_<device>.csv
+(OUT = `--out`, default outputs/perf/).
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from bench import cli
-from bench.capture import Capture
+from methods.domain.capture import Capture
 from bench.maroon import discover_captures, read_capture
 from bench.perf_frames import DEFAULT_OUT, write_rows
 from methods import reconstruct
@@ -67,22 +68,19 @@ def run_cases(captures: list[Capture], cases: list[str], device: str, repeat: in
         times = {v: [] for v in VARIANTS}
         stages = {v: [] for v in VARIANTS}
         agree, roi_px = [], []
-        for cap in captures:                                            # untimed: compilation, first uploads
-            for variant in VARIANTS:
-                reconstruct(new_frame(cap, rng, 1), method, freq, prior=prior, device=device, roi=variant)
+        for cap in captures:             # untimed: compilation, first uploads, and the agreement on one frame
+            frame = new_frame(cap, rng, 1)
+            results = {v: reconstruct(frame, method, freq, prior=prior, device=device, roi=v) for v in VARIANTS}
+            agree.append(agreement(results["none"].depth_m, results["auto"].depth_m))
+            roi_px.append(int(results["auto"].extra.get("roi_px", -1) or -1))
         for run in range(repeat):
             for cap in captures:
-                results = {}
                 for variant in (VARIANTS if run % 2 == 0 else VARIANTS[::-1]):
                     frame = new_frame(cap, rng, 1 + run % 2)
                     t0 = time.perf_counter()
                     rec = reconstruct(frame, method, freq, prior=prior, device=device, roi=variant)
                     times[variant].append(1e3 * (time.perf_counter() - t0))
                     stages[variant].append(rec.timings_ms)
-                    results[variant] = rec
-                if run == 0:
-                    agree.append(agreement(results["none"].depth_m, results["auto"].depth_m))
-                    roi_px.append(int(results["auto"].extra.get("roi_px", -1) or -1))
         for variant in VARIANTS:
             names = sorted({s for t in stages[variant] for s in t})
             row = {"case": label, "variant": variant, "device": device, "captures": len(captures),
