@@ -35,6 +35,8 @@ STRESS_PRECISION = ["{py} -m bench.stress --precision-only --quick --out {tmp}/g
                     "test -s {tmp}/report/summary.md"]
 # README command -> the commands run for it, in order. {py}: this interpreter, {synth}: the synth_root fixture,
 # {tmp}: an empty folder of this test, {repo}: the checkout.
+REPORT_RUN = ["cp -r {repo}/results/table3 {tmp}/table3", "{py} -m bench.report {tmp}/table3 --out {tmp}/report.html",
+              "test -s {tmp}/report.html"]
 README_RUNS: dict[str, list[str]] = {
     "bash run.sh demo": ["bash run.sh demo --help"],
     "bash run.sh test": ["bash run.sh test --help"],
@@ -42,7 +44,8 @@ README_RUNS: dict[str, list[str]] = {
     "bash run.sh test -k reader": ["bash run.sh test -k reader --collect-only -q tests/test_reader.py"],
     "bash run.sh demo --out /tmp/demo": ["bash run.sh demo --out {tmp}/demo --help"],
     ".venv/bin/python -m bench.demo": ["{py} -m bench.demo --help"],
-    "python -m bench.demo [--out DIR] [--store DIR] [--update-results]": ["{py} -m bench.demo --help"],
+    "python -m bench.demo [--out DIR] [--store DIR] [--distances CM ...] [--update-results]":
+        ["{py} -m bench.demo --help"],
     "bash run.sh demo --update-results": ["bash run.sh demo --update-results --help"],
     "python -m bench": ["{py} -m bench --help"],
     # sweeps take minutes: composed (experiment, cells, launcher) but not run
@@ -58,12 +61,24 @@ README_RUNS: dict[str, list[str]] = {
         ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=custom "
          "method._target_=examples.prior_only.PriorOnly prior=realsense freq=d10 store.dir=null "
          "hydra.run.dir={tmp}/own", "test -s {tmp}/own/results.csv"],
-    ".venv/bin/python -m bench -m experiment=table3 hydra/launcher=slurm hydra.launcher.partition=gpu device=cuda "
-    "grid=paper": ["{py} -m bench experiment=table3 hydra/launcher=slurm hydra.launcher.partition=gpu device=cuda "
-                   "grid=paper --cfg all"],
+    ".venv/bin/python -m bench -m experiment=table3 hydra/launcher=slurm_gpu hydra.launcher.partition=gpu device=cuda "
+    "grid=paper": ["{py} -m bench experiment=table3 hydra/launcher=slurm_gpu hydra.launcher.partition=gpu "
+                   "device=cuda grid=paper --cfg all"],
+    ".venv/bin/python -m bench -m experiment=table3 hydra/launcher=slurm_cpu hydra.launcher.partition=cpu":
+        ["{py} -m bench experiment=table3 hydra/launcher=slurm_cpu hydra.launcher.partition=cpu --cfg all"],
+    # starting SLURM daemons is not a test's business: syntax only (test_slurm runs them, opt-in)
+    "sudo bash scripts/slurm_single_node.sh start": ["bash -n {repo}/scripts/slurm_single_node.sh"],
+    "sudo bash scripts/slurm_try.sh": ["bash -n {repo}/scripts/slurm_try.sh"],
+    # the report for real on a copy of the committed table3 (no job folders: no pictures, seconds)
+    ".venv/bin/python -m bench.report outputs/demo/table2 outputs/demo/table3 --out outputs/demo/report.html":
+        REPORT_RUN,
+    "python -m bench.report SWEEP_ROOT [SWEEP_ROOT ...]": REPORT_RUN,
+    "python -m bench.report": ["{py} -m bench.report --help"],
+    "python -m bench.report SWEEP_ROOT [SWEEP_ROOT ...] [--out FILE] [--no-pictures]": REPORT_RUN,
+    "bash run.sh demo --distances 30 40 50": ["bash run.sh demo --distances 30 40 50 --help"],
     ".venv/bin/python -m bench -m experiment=table3 hydra/launcher=submitit_local":
         ["{py} -m bench experiment=table3 hydra/launcher=submitit_local --cfg all"],
-    r"python -m bench -m experiment=table2\|table3\|runtime [hydra/launcher=local\|slurm\|submitit_local]":
+    r"python -m bench -m experiment=table2\|table3\|runtime [hydra/launcher=local\|slurm_cpu\|slurm_gpu\|submitit_local]":
         ["{py} -m bench experiment=runtime hydra/launcher=submitit_local --cfg all"],
     # one run, for real (one capture, 2FSK: seconds); the MM-2FSK run is test_app's
     r"python -m bench dataset.root=DIR method=bp\|2fsk\|3fsk\|mm2fsk freq=CONFIG "
