@@ -1,6 +1,7 @@
 """New-frame latency with the default skips against the full computation: `python -m bench.perf_skips_gpu`.
 
-`python -m bench.perf_skips_gpu --root DIR [--device cuda|cpu|warp-cpu] [--repeat N] [--cases a,b] [--out DIR]`
+`python -m bench.perf_skips_gpu --root DIR [--device cuda|cpu|warp-cpu] [--repeat N] [--cases a,b]
+[--variants auto,none|auto|none] [--out DIR]`
 reads every capture under DIR (radar + RealSense: no Open3D) and times, for each case (BP_max, BP d05, MM-2FSK d10
 with the RealSense prior, 2FSK d05, 3FSK d05_d10; the capture's own grid, i.e. the paper's 301 x 301 x 201), the
 whole `methods.reconstruct` call (result back on the host) with `roi=auto` (the default skips) and `roi=none`
@@ -59,35 +60,47 @@ def agreement(ref_m: np.ndarray, depth_m: np.ndarray) -> float:
     return 100.0 * float(np.mean(np.abs(ref_m[both] - depth_m[both]) <= DEPTH_TOL_M))
 
 
-def run_cases(captures: list[Capture], cases: list[str], device: str, repeat: int, seed: int = 0) -> list[dict]:
-    """Rows per case and variant: new-frame wall time median/p90, stage medians, agreement of auto with none."""
+def run_cases(captures: list[Capture], cases: list[str], device: str, repeat: int, seed: int = 0,
+              variants: tuple[str, ...] = VARIANTS) -> list[dict]:
+    """Rows per case and variant: new-frame wall time median/p90, stage medians, agreement of auto with none (when
+    both run; `variants` ("auto",) times the default skips alone, e.g. where the full computation takes minutes)."""
     rng = np.random.default_rng(seed)
     rows = []
+    both = set(variants) == set(VARIANTS)
     for label in cases:
         method, freq, prior = CASES[label]
-        times = {v: [] for v in VARIANTS}
-        stages = {v: [] for v in VARIANTS}
+        times = {v: [] for v in variants}
+        stages = {v: [] for v in variants}
         agree, roi_px = [], []
-        for cap in captures:             # untimed: compilation, first uploads, and the agreement on one frame
+        # untimed: compilation, first uploads, and the agreement on one frame (alone: the first capture only)
+        for cap in captures if both else captures[:1]:
             frame = new_frame(cap, rng, 1)
-            results = {v: reconstruct(frame, method, freq, prior=prior, device=device, roi=v) for v in VARIANTS}
-            agree.append(agreement(results["none"].depth_m, results["auto"].depth_m))
-            roi_px.append(int(results["auto"].extra.get("roi_px", -1) or -1))
+            results = {v: reconstruct(frame, method, freq, prior=prior, device=device, roi=v) for v in variants}
+            if both:
+                agree.append(agreement(results["none"].depth_m, results["auto"].depth_m))
+            if "auto" in results:
+                roi_px.append(int(results["auto"].extra.get("roi_px", -1) or -1))
+        per_capture = {cap.name: [] for cap in captures}
         for run in range(repeat):
             for cap in captures:
-                for variant in (VARIANTS if run % 2 == 0 else VARIANTS[::-1]):
+                for variant in (variants if run % 2 == 0 else variants[::-1]):
                     frame = new_frame(cap, rng, 1 + run % 2)
                     t0 = time.perf_counter()
                     rec = reconstruct(frame, method, freq, prior=prior, device=device, roi=variant)
                     times[variant].append(1e3 * (time.perf_counter() - t0))
                     stages[variant].append(rec.timings_ms)
-        for variant in VARIANTS:
+                    if variant == variants[0]:
+                        per_capture[cap.name].append(times[variant][-1])
+        if not both:                    # per object, as the CPU figures are reported
+            for name, ms in per_capture.items():
+                print(f"{label:13s} {variants[0]:5s} {name:24s} median {statistics.median(ms):10.1f} ms", flush=True)
+        for variant in variants:
             names = sorted({s for t in stages[variant] for s in t})
             row = {"case": label, "variant": variant, "device": device, "captures": len(captures),
                    "frames": len(times[variant]), "median_ms": statistics.median(times[variant]),
                    "p90_ms": _percentile(times[variant], 90),
-                   "agree_min_pct": min(agree) if variant == "auto" else 100.0,
-                   "roi_px_median": statistics.median(roi_px) if variant == "auto" else ""}
+                   "agree_min_pct": min(agree) if agree and variant == "auto" else (100.0 if both else float("nan")),
+                   "roi_px_median": statistics.median(roi_px) if roi_px and variant == "auto" else ""}
             row.update({f"{s}_ms": statistics.median(t.get(s, 0.0) for t in stages[variant]) for s in names})
             rows.append(row)
             detail = "  ".join(f"{s} {row[f'{s}_ms']:.2f}" for s in names if s != "total")
@@ -102,6 +115,8 @@ def main(argv=None) -> int:
     parser.add_argument("--device", default="cuda", choices=["cpu", "cuda", "warp-cpu", "auto"])
     parser.add_argument("--repeat", type=cli.positive_int, default=3, help="timed new frames per capture and variant")
     parser.add_argument("--cases", default=",".join(CASES), help=f"comma-separated subset of {', '.join(CASES)}")
+    parser.add_argument("--variants", default="auto,none", choices=["auto,none", "auto", "none"],
+                        help="auto,none (default: both, interleaved, with their agreement) or one alone")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="folder for the CSV (default: outputs/perf)")
     args = parser.parse_args(argv)
     cases = [c for c in args.cases.split(",") if c]
@@ -112,7 +127,8 @@ def main(argv=None) -> int:
     device = cli.resolve_device(args.device)
     out = cli.output_dir(args.out)
     captures = [read_capture(d, parts=("radar", "realsense")) for d in discover_captures(root)]
-    write_rows(run_cases(captures, cases, device, args.repeat), out / f"perf_skips_gpu_{device}.csv")
+    rows = run_cases(captures, cases, device, args.repeat, variants=tuple(args.variants.split(",")))
+    write_rows(rows, out / f"perf_skips_gpu_{device}.csv")
     return 0
 
 
