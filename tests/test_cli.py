@@ -98,8 +98,14 @@ README_RUNS: dict[str, list[str]] = {
     "python -m bench.sweep ROOT --table table3":      # a sweep root made of the committed table3 rows
         ["mkdir -p {tmp}/sweep/0_job", "cp {repo}/results/table3/results.csv {tmp}/sweep/0_job/",
          "{py} -m bench.sweep {tmp}/sweep --table table3", "test -s {tmp}/sweep/table3.tex"],
-    "python -m bench.synth --out DIR [--distances 30 40 50] [--objects ...] [--snr-db X] [--seed S]":
-        ["{py} -m bench.synth --help"],     # generating takes ~15 s a capture; bench.synth runs in test_synth_*
+    r"python -m bench.synth --out DIR [--preset realistic\|ideal] [--distances 30 40 50] [--objects ...] [--seed S]":
+        ["{py} -m bench.synth --help"],     # generating takes ~15-60 s a capture; bench.synth runs in test_synth_*
+    # the agreement report generates the catalogue and runs 19 cells (~15 min): its options are checked only
+    "python -m bench.agreement": ["{py} -m bench.agreement --help"],
+    ".venv/bin/python -m bench.agreement": ["{py} -m bench.agreement --help"],
+    ".venv/bin/python -m bench.agreement --ablation --no-tables": ["{py} -m bench.agreement --help"],
+    r"python -m bench.agreement [--preset realistic\|ideal] [--objects ...] [--cells ...] [--ablation] [--out DIR]":
+        ["{py} -m bench.agreement --help"],
     ".venv/bin/python -m bench.inspect /data/maroon": ["{py} -m bench.inspect {synth}"],
     "python -m bench.inspect DIR": ["{py} -m bench.inspect {synth}"],
     "python -m bench.inspect": ["{py} -m bench.inspect --help"],        # named in prose

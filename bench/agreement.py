@@ -1,0 +1,262 @@
+"""`python -m bench.agreement [--preset realistic] [--out DIR] [--objects ...] [--cells ...] [--ablation]`:
+how far the synthetic benchmark is from the paper's real-data Tables II and III.
+
+1. Generates the catalogue at 30 cm with the preset (bench.synth; cached under `--out`/data/<preset>), runs every
+   cell of the paper's Tables II (MM-2FSK x 6 configurations, photogrammetry prior) and III (13 cells) through
+   `bench.app.run` (finished cells come from the result store `--store`), and writes `--out`/agreement.md:
+   the synthetic tables beside the paper's (MM-2FSK.txt, Tables II and III), the ratio synthetic / paper per cell,
+   the cells outside a factor 2, the ordering of the methods per metric against the paper's (Kendall's tau and the
+   pairs the paper's text stresses), and the RealSense prior's cost (Table III / Table II for MM-2FSK, paper: 7.2x
+   on P at d10).
+2. `--ablation` adds one table: the realistic preset with one effect switched off at a time (bench.synth.config.
+   EFFECTS), on `--ablation-objects` with 21 frequencies (72-82 GHz in 0.5 GHz steps, which holds every
+   two-frequency configuration of Table III exactly) and the cells `--ablation-cells` (no BP_max: it needs 128).
+
+BP runs on the reduced CPU grid `bp_cpu` like the demo (cells' own grid). Costs are in the README.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from bench import cli, tables
+
+PAPER_METRICS = ["C_g_cm", "C_s_cm", "P_cm", "P_e_cm"]
+# MM-2FSK.txt, Table II (photogrammetry prior, 45 objects at 30 cm): C_g, C_s, P, P_e in cm
+PAPER_TABLE2 = {"d05": (0.72, 2.14, 2.15, 1.69), "d1": (0.74, 1.26, 1.74, 1.44), "d2": (0.57, 0.60, 0.77, 0.70),
+                "d4": (0.53, 0.35, 0.41, 0.37), "d8": (0.54, 0.22, 0.24, 0.21), "d10": (0.51, 0.18, 0.19, 0.17)}
+# MM-2FSK.txt, Table III (RealSense prior for MM-2FSK, scalar prior for 2FSK/3FSK, none for BP)
+PAPER_TABLE3 = {
+    "bp_full": (0.82, 0.90, 0.94, 0.85), "bp_d05": (0.69, 4.27, 3.34, 3.18), "bp_d1": (0.79, 5.29, 3.70, 3.40),
+    "bp_d10": (1.02, 6.35, 4.98, 4.87), "2fsk_d05": (0.90, 2.36, 2.55, 2.10), "2fsk_d1": (8.68, 12.27, 12.87, 12.82),
+    "2fsk_d10": (9.80, 9.69, 10.38, 10.38), "3fsk_d05_d10": (0.83, 2.54, 2.63, 2.30),
+    "3fsk_d1_d10": (8.37, 12.47, 12.88, 12.87), "3fsk_d2_d10": (6.43, 7.90, 8.51, 8.52),
+    "mm2fsk_d05": (0.95, 2.95, 3.13, 2.39), "mm2fsk_d1": (0.98, 2.72, 2.84, 2.28), "mm2fsk_d10": (0.82, 1.74, 1.36, 1.01)}
+# pairs the paper's text states (Section IV.C): (better, worse, metric)
+PAPER_PAIRS = [("bp_full", "mm2fsk_d10", "P_cm"), ("2fsk_d05", "mm2fsk_d05", "P_cm"),
+               ("mm2fsk_d10", "bp_d10", "P_cm"), ("mm2fsk_d10", "2fsk_d10", "P_cm"),
+               ("mm2fsk_d1", "2fsk_d1", "P_cm"), ("mm2fsk_d10", "3fsk_d05_d10", "P_cm")]
+# BP is left out of the ablation: bp_d05 took 272 s on 4 captures at load ~6 (as much as 15 variants' MM-2FSK)
+ABLATION_CELLS = ("mm2fsk_d10", "mm2fsk_d10@photogrammetry", "mm2fsk_d05", "2fsk_d05")
+ABLATION_OBJECTS = ("03_sphere", "04_bottle", "08_two_objects")    # wood; plastic shell; metal + foam and an edge
+ABLATION_FREQUENCY_POINTS = 21
+
+
+def cell_overrides(cell: str) -> list[str]:
+    """Hydra overrides of a cell name: `mm2fsk_d10` (configs/cell/) or `mm2fsk_d10@photogrammetry` (Table II)."""
+    name, _, prior = cell.partition("@")
+    if prior:
+        method, freq = name.split("_", 1)
+        return [f"method={method}", f"freq={freq}", f"prior={prior}"]
+    return [f"cell={name}"]
+
+
+def run_cells(root: Path, cells: list[str], objects: list[str], store: Path | None, out: Path) -> pd.DataFrame:
+    """Rows of every cell on the captures `<root>/<object>/30` (bench.app.run, timing 'parallel')."""
+    from hydra import compose, initialize_config_dir
+
+    from bench.app import CONFIG_DIR, run
+
+    frames = []
+    for cell in cells:
+        overrides = ["dataset=maroon", f"dataset.root={root}", f"dataset.captures=[{','.join(o + '/30' for o in objects)}]",
+                     f"store.dir={store if store is not None else 'null'}", *cell_overrides(cell)]
+        with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+            cfg = compose(config_name="config", overrides=overrides)
+        started = time.perf_counter()
+        rows = pd.DataFrame(run(cfg, out / "runs" / cell.replace("@", "_"), timing="parallel"))
+        rows["cell"] = cell
+        frames.append(rows)
+        print(f"  {cell}: {len(rows)} captures, {time.perf_counter() - started:.0f} s", flush=True)
+    return pd.concat(frames, ignore_index=True)
+
+
+def generate(root: Path, config, objects: list[str]) -> float:
+    """Generate (or find cached) the captures at 30 cm; returns the seconds spent."""
+    from bench.synth import generate_catalogue
+
+    started = time.perf_counter()
+    generate_catalogue(root, [30], objects, config)
+    return time.perf_counter() - started
+
+
+def means(rows: pd.DataFrame) -> pd.DataFrame:
+    """Mean metrics per cell over the captures where every metric is defined (as bench.tables does)."""
+    good = rows[tables.succeeded(rows)]
+    summary = good.groupby("cell", sort=False)[PAPER_METRICS].mean()
+    summary["ok"] = good.groupby("cell", sort=False).size()
+    summary["captures"] = rows.groupby("cell", sort=False).size()
+    return summary
+
+
+def comparison(summary: pd.DataFrame, paper: dict, labels: dict) -> pd.DataFrame:
+    """Per cell and metric: synthetic, paper and their ratio."""
+    lines = []
+    for key, values in paper.items():
+        if key not in summary.index:
+            continue
+        line = {"cell": labels[key], "ok": f"{summary.loc[key, 'ok']}/{summary.loc[key, 'captures']}"}
+        for metric, value in zip(PAPER_METRICS, values):
+            synthetic = summary.loc[key, metric]
+            name = metric.removesuffix("_cm")
+            line[f"{name} syn"], line[f"{name} paper"] = synthetic, value
+            line[f"{name} ratio"] = synthetic / value
+        lines.append(line)
+    return pd.DataFrame(lines)
+
+
+def outside_factor_two(table: pd.DataFrame) -> list[str]:
+    """'cell metric ratio' for every ratio outside [0.5, 2]."""
+    found = []
+    for _, line in table.iterrows():
+        for metric in PAPER_METRICS:
+            ratio = line[f"{metric.removesuffix('_cm')} ratio"]
+            if not 0.5 <= ratio <= 2.0:
+                found.append(f"{line['cell']} {metric.removesuffix('_cm')} x{ratio:.2f}")
+    return found
+
+
+def orderings(summary: pd.DataFrame, paper: dict, labels: dict) -> tuple[pd.DataFrame, list[str]]:
+    """Per metric: Kendall's tau between the synthetic and the paper's ranking of the cells, and the best cell of
+    each; then the paper's stated pairs (better < worse) and whether they hold."""
+    keys = [k for k in paper if k in summary.index]
+    lines = []
+    for index, metric in enumerate(PAPER_METRICS):
+        ours = np.array([summary.loc[k, metric] for k in keys])
+        theirs = np.array([paper[k][index] for k in keys])
+        tau = stats.kendalltau(ours, theirs).statistic if len(keys) > 1 else float("nan")
+        lines.append({"metric": metric.removesuffix("_cm"), "Kendall tau": tau,
+                      "best (synthetic)": labels[keys[int(np.nanargmin(ours))]],
+                      "best (paper)": labels[keys[int(np.argmin(theirs))]],
+                      "synthetic order": " < ".join(labels[keys[i]] for i in np.argsort(ours)),
+                      "paper order": " < ".join(labels[keys[i]] for i in np.argsort(theirs))})
+    pairs = []
+    for better, worse, metric in PAPER_PAIRS:
+        if better in summary.index and worse in summary.index:
+            ours = summary.loc[better, metric] < summary.loc[worse, metric]
+            pairs.append(f"{labels[better]} < {labels[worse]} on {metric.removesuffix('_cm')} (paper): "
+                         f"{'holds' if ours else 'FAILS'} ({summary.loc[better, metric]:.2f} vs "
+                         f"{summary.loc[worse, metric]:.2f} cm)")
+    return pd.DataFrame(lines), pairs
+
+
+def prior_cost(summary: pd.DataFrame) -> pd.DataFrame:
+    """MM-2FSK with the RealSense prior over the photogrammetry prior, per configuration and metric."""
+    lines = []
+    for freq in ("d05", "d1", "d10"):
+        real, ground = f"mm2fsk_{freq}", f"mm2fsk_{freq}@photogrammetry"
+        if real not in summary.index or ground not in summary.index:
+            continue
+        line = {"configuration": tables.row_label("mm2fsk", freq)}
+        for index, metric in enumerate(PAPER_METRICS):
+            name = metric.removesuffix("_cm")
+            line[f"{name} syn"] = summary.loc[real, metric] / summary.loc[ground, metric]
+            line[f"{name} paper"] = PAPER_TABLE3[real][index] / PAPER_TABLE2[freq][index]
+        lines.append(line)
+    return pd.DataFrame(lines)
+
+
+def labels_of(cells: list[str]) -> dict:
+    out = {}
+    for cell in cells:
+        name, _, prior = cell.partition("@")
+        method, freq = name.split("_", 1)
+        out[cell] = tables.row_label(method, freq) + (f" ({prior})" if prior else "")
+    out.update({f: tables.row_label("mm2fsk", f) + " (photogrammetry)" for f in PAPER_TABLE2})
+    out.update({c: tables.row_label(*c.split("_", 1)) for c in PAPER_TABLE3})
+    return out
+
+
+def ablation(config, objects: list[str], cells: list[str], store: Path | None, out: Path) -> pd.DataFrame:
+    """P (cm) per cell with the preset and with each effect off, on a reduced frequency grid; plus the prior cost."""
+    from bench.synth.config import EFFECTS
+
+    variants = {"all effects on": {}, **EFFECTS}
+    lines = []
+    for name, off in variants.items():
+        variant = dataclasses.replace(config, frequency_points=ABLATION_FREQUENCY_POINTS, **off)
+        slug = name.replace(" ", "_")
+        seconds = generate(out / "ablation" / slug, variant, objects)
+        print(f"ablation '{name}': data {seconds:.0f} s", flush=True)
+        summary = means(run_cells(out / "ablation" / slug, cells, objects, store, out / "ablation_runs" / slug))
+        line = {"effect off": name}
+        line.update({cell: summary.loc[cell, "P_cm"] for cell in cells if cell in summary.index})
+        if {"mm2fsk_d10", "mm2fsk_d10@photogrammetry"} <= set(summary.index):
+            line["prior cost d10"] = summary.loc["mm2fsk_d10", "P_cm"] / summary.loc["mm2fsk_d10@photogrammetry",
+                                                                                      "P_cm"]
+        lines.append(line)
+    return pd.DataFrame(lines)
+
+
+def _markdown(frame: pd.DataFrame) -> str:
+    return tables.to_markdown(frame) if len(frame) else "(no cells)"
+
+
+def main() -> int:
+    from bench.synth import CATALOGUE
+    from bench.synth.config import PRESETS, preset
+
+    parser = cli.ArgumentParser(prog="python -m bench.agreement", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--preset", choices=list(PRESETS), default="realistic")
+    parser.add_argument("--out", type=Path, default=Path("outputs/agreement"))
+    parser.add_argument("--store", type=Path, default=Path("outputs/store"), help="result store; 'none' for none")
+    parser.add_argument("--objects", nargs="+", default=list(CATALOGUE), choices=list(CATALOGUE))
+    parser.add_argument("--cells", nargs="+", default=None,
+                        help="subset of the Tables II/III cells, e.g. mm2fsk_d10 mm2fsk_d10@photogrammetry")
+    parser.add_argument("--ablation", action="store_true", help="also the one-effect-off table")
+    parser.add_argument("--ablation-objects", nargs="+", default=list(ABLATION_OBJECTS), choices=list(CATALOGUE))
+    parser.add_argument("--ablation-cells", nargs="+", default=list(ABLATION_CELLS))
+    parser.add_argument("--no-tables", action="store_true", help="only the ablation")
+    args = parser.parse_args()
+    all_cells = [f"mm2fsk_{f}@photogrammetry" for f in PAPER_TABLE2] + list(PAPER_TABLE3)
+    cells = all_cells if args.cells is None else args.cells
+    unknown = [c for c in cells + args.ablation_cells if c not in all_cells]
+    if unknown:
+        parser.error(f"unknown cell(s) {', '.join(unknown)}; known: {', '.join(all_cells)}")
+    out = cli.output_dir(args.out).resolve()
+    store = None if str(args.store) == "none" else args.store.resolve()
+    config = preset(args.preset)
+    labels = labels_of(all_cells)
+    started = time.perf_counter()
+    parts = [f"# Paper agreement: synthetic preset `{args.preset}` against MM-2FSK Tables II and III\n",
+             f"Captures: {', '.join(args.objects)} at 30 cm (paper: 45 MAROON objects at 30 cm). Metrics in cm; "
+             "ratio = synthetic / paper. BP on the reduced CPU grid bp_cpu."]
+    if not args.no_tables:
+        root = out / "data" / args.preset
+        print(f"data {root}: {generate(root, config, args.objects):.0f} s", flush=True)
+        rows = run_cells(root, cells, args.objects, store, out)
+        rows.to_csv(out / "rows.csv", index=False)
+        summary = means(rows)
+        table2 = comparison(summary.rename(index=lambda c: c.split("_", 1)[1].split("@")[0] if "@" in c else c),
+                            PAPER_TABLE2, {f: labels[f] for f in PAPER_TABLE2})
+        table3 = comparison(summary, PAPER_TABLE3, labels)
+        order, pairs = orderings(summary, PAPER_TABLE3, labels)
+        cost = prior_cost(summary)
+        outside = outside_factor_two(pd.concat([table2, table3]))
+        parts += ["\n## Table II (MM-2FSK, photogrammetry prior)\n", _markdown(table2),
+                  "\n## Table III\n", _markdown(table3),
+                  f"\n## Cells outside a factor 2 ({len(outside)} of {4 * (len(table2) + len(table3))})\n",
+                  "\n".join(f"* {line}" for line in outside) or "none",
+                  "\n## Ordering of the Table III cells per metric\n", _markdown(order),
+                  "\nPairs the paper states:\n", "\n".join(f"* {p}" for p in pairs),
+                  "\n## RealSense prior's cost (MM-2FSK, Table III / Table II)\n", _markdown(cost)]
+    if args.ablation:
+        table = ablation(config, args.ablation_objects, args.ablation_cells, store, out)
+        parts += [f"\n## Ablation: P (cm) with one effect off ({', '.join(args.ablation_objects)}; "
+                  f"{ABLATION_FREQUENCY_POINTS} frequencies)\n", _markdown(table)]
+    parts.append(f"\n{time.perf_counter() - started:.0f} s in all.")
+    text = "\n".join(parts) + "\n"
+    (out / "agreement.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    cli.run_guarded(main)
