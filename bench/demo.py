@@ -7,8 +7,9 @@
    alone (rows get `timing=alone`; stored rows timed beside other jobs are re-measured). Finished cells come from
    the result store (`--store`), so a re-run computes only missing cells. Each job prints one progress line.
 3. Prints Tables I-III and writes one HTML page, `<out>/report.html` (bench.report: every table with its spread
-   across captures, a per-object view, the runtime plot, paper-style pictures for table3), and prints its path. Everything goes under `--out` (default outputs/demo): the sweep roots `<out>/table2|table3/`
-   and Table I `<out>/table1.*`. Tracked files are left alone unless `--update-results` is given: then Table I and
+   across captures, a per-object view, the runtime plot, paper-style pictures for table3), and prints its path.
+   Everything goes under `--out` (default outputs/demo): the sweep roots `<out>/table2|table3/` and Table I
+   `<out>/table1.*`. Tracked files are left alone unless `--update-results` is given: then Table I and
    each sweep's tables, plots and per-capture rows (the regression baselines) are copied into `--results`
    (default results/).
 """
@@ -119,6 +120,10 @@ def publish(sweep_root: Path, rows: pd.DataFrame, table: str, results: Path) -> 
     for name in REPORT_FILES:
         shutil.copy2(sweep_root / name.format(table=table), target)
     shutil.copytree(sweep_root / "depth_errors", target / "depth_errors")
+    pictures = sweep_root / "pictures" / "point_clouds"        # the paper-style figures (bench.report), not the PLY
+    for picture in sorted(pictures.glob("*.png")) if pictures.is_dir() else []:
+        (target / "point_clouds").mkdir(exist_ok=True)
+        shutil.copy2(picture, target / "point_clouds")
     rows.drop(columns="cached").to_csv(target / "results.csv", index=False)
 
 

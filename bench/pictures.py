@@ -361,12 +361,17 @@ def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str
                    ply: bool = True) -> dict[str, dict[str, Path]]:
     """Point-cloud figures (+ PLY) and panels of every capture of the runs ((label, arrays.h5) pairs) under
     `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}."""
+    from bench.progress import bar
+
     use = renderer()
     written = {}
-    for stem in capture_stems([path for _, path in runs]):
-        cells = [(label, arrays) for label, path in runs if (arrays := read_arrays(path, stem)) is not None]
-        written[stem] = {
-            "point_clouds": point_cloud_figure(cells, stem, out_dir / "point_clouds" / f"{stem}.png",
-                                               out_dir / "point_clouds" if ply else None, use=use),
-            "panel": capture_panel(cells, stem, out_dir / "panels" / f"{stem}.png", (priors or {}).get(stem))}
+    stems = capture_stems([path for _, path in runs])
+    with bar(len(stems), f"pictures ({use})", unit="capture") as progress:
+        for stem in stems:
+            cells = [(label, arrays) for label, path in runs if (arrays := read_arrays(path, stem)) is not None]
+            written[stem] = {
+                "point_clouds": point_cloud_figure(cells, stem, out_dir / "point_clouds" / f"{stem}.png",
+                                                   out_dir / "point_clouds" if ply else None, use=use),
+                "panel": capture_panel(cells, stem, out_dir / "panels" / f"{stem}.png", (priors or {}).get(stem))}
+            progress.update()
     return written

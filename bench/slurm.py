@@ -15,10 +15,11 @@ submitting process and before anything is submitted:
   `timeout_min: 0`, a time limit from the cell (`time_limit_min`).
 
 Then it waits for every job without relying on accounting: a job is done when submitit's result file appears, and
-dead when SLURM no longer lists it (squeue) and no result came; its cause comes from `sacct` where accounting
-exists, else from its log (time limit, cancellation, out of memory, the job's own `error:` line). When any job did
-not finish, the rows of the jobs that did are merged (bench.sweep), each missing cell is named with its cause on
-stderr, and the sweep exits 1. A re-run of the same command recomputes only the missing cells (the store).
+dead when SLURM no longer lists it (squeue) and no result came; its cause comes from `sacct` (accounting) or
+`scontrol` (the controller), else from its log (time limit, cancellation, out of memory, the job's own `error:`
+line). When any job did not finish, the rows of the jobs that did are merged (bench.sweep), each missing cell is
+named with its cause on stderr, and the sweep exits 1. A re-run of the same command recomputes only the missing
+cells (the store).
 """
 from __future__ import annotations
 
@@ -105,14 +106,24 @@ def listed_jobs() -> set[str] | None:
     return set(proc.stdout.split()) if proc.returncode == 0 else None
 
 
+def slurm_state(job_id: str) -> str:
+    """SLURM's word for how a job ended: sacct (accounting), else scontrol (the controller keeps an ended job for
+    MinJobAge, 300 s by default), else ''."""
+    for command, pattern in ((["sacct", "-n", "-P", "-X", "-j", job_id, "-o", "State,ExitCode"], r"^(\S+)"),
+                             (["scontrol", "-o", "show", "job", job_id], r"JobState=(\S+)")):
+        try:
+            proc = subprocess.run(command, capture_output=True, text=True, timeout=30)
+        except (OSError, subprocess.TimeoutExpired):
+            continue
+        found = re.search(pattern, proc.stdout.strip()) if proc.returncode == 0 else None
+        if found:
+            return found.group(1)
+    return ""
+
+
 def death_cause(job, timeout_min: int, mem_gb: int | None) -> str:
     """Why a job ended without a result: sacct's state where accounting exists, else what its log says."""
-    try:
-        proc = subprocess.run(["sacct", "-n", "-P", "-X", "-j", str(job.job_id), "-o", "State,ExitCode"],
-                              capture_output=True, text=True, timeout=30)
-        state = proc.stdout.split("\n")[0].strip() if proc.returncode == 0 else ""
-    except (OSError, subprocess.TimeoutExpired):
-        state = ""
+    state = slurm_state(str(job.job_id))
     log = ""
     for path in (job.paths.stderr, job.paths.stdout):
         if Path(path).is_file():

@@ -34,6 +34,7 @@ def _knobs(n_values: int | None) -> dict:
 
 def run(out: Path, quick: bool, seed: int = 0, log=print) -> dict[str, list[dict]]:
     """Run all experiments, write OUT/<name>.csv, OUT/<name>.png and OUT/summary.md; return the rows."""
+    from bench.progress import bar
     from bench.stress import hostile, noise, prior_degradation, wrapping
     from bench.synth import SynthConfig, generate_capture
 
@@ -41,12 +42,18 @@ def run(out: Path, quick: bool, seed: int = 0, log=print) -> dict[str, list[dict
     out.mkdir(parents=True, exist_ok=True)
     results, seconds = {}, {}
 
+    progress = bar(7, "stress experiments", unit="experiment")
+
     def step(name, compute):
+        progress.set_postfix_str(name)
         start = time.perf_counter()
         results[name] = compute()
         seconds[name] = time.perf_counter() - start
         pd.DataFrame(results[name]).to_csv(out / f"{name}.csv", index=False, float_format="%.6g")
+        progress.update()
+        progress.clear()
         log(f"{name}: {len(results[name])} rows in {seconds[name]:.1f} s")
+        progress.refresh()
 
     step("precision", lambda: precision.precision_rows(size["distances_m"], size["grid_sizes"],
                                                        precision.available_devices(), size["n_ref"], seed))
@@ -59,6 +66,7 @@ def run(out: Path, quick: bool, seed: int = 0, log=print) -> dict[str, list[dict
     with tempfile.TemporaryDirectory() as tmp:
         source = generate_capture(Path(tmp) / "source", "01_plate", 30, SynthConfig(frequency_points=16, seed=seed))
         step("hostile", lambda: hostile.hostile_rows(source, Path(tmp) / "work"))
+    progress.close()
     pd.DataFrame({"experiment": list(seconds), "seconds": list(seconds.values())}).to_csv(
         out / "timings.csv", index=False, float_format="%.1f")
     _report(out, results, seconds, quick)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
 
 from bench import cli
@@ -55,12 +56,18 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
 
+    from bench.progress import bar
+
+    progress = bar(len(args.objects or CATALOGUE) * len(args.distances), "captures", unit="capture")
+
     def log(result: CaptureResult) -> None:
-        print(f"{result.status:9s} {result.path}  {result.seconds:6.2f} s", flush=True)
+        progress.write(f"{result.status:9s} {result.path}  {result.seconds:6.2f} s", file=sys.stdout)
+        progress.update()
 
     start = time.perf_counter()
     try:
-        results = generate_catalogue(args.out, args.distances, args.objects, config, args.force, log)
+        with progress:
+            results = generate_catalogue(args.out, args.distances, args.objects, config, args.force, log)
     except OSError as err:
         raise cli.UserError(args.out, f"cannot write the dataset there ({err.strerror or err})") from None
     generated = sum(r.status == "generated" for r in results)
