@@ -85,6 +85,11 @@ README_RUNS: dict[str, list[str]] = {
     r"prior=none\|realsense\|photogrammetry [device=cpu\|cuda] hydra.run.dir=OUT":
         ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=2fsk freq=d05 "
          "prior=none device=cpu store.dir=null hydra.run.dir={tmp}/run", "test -s {tmp}/run/results.csv"],
+    ".venv/bin/python -m bench profile=faithful dataset=maroon dataset.root=/data/maroon method=mm2fsk freq=d10 "
+    "prior=realsense":      # for real on one capture with 2FSK (seconds); the faithful rows say so
+        ["{py} -m bench profile=faithful dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] "
+         "method=2fsk freq=d05 prior=none store.dir=null hydra.run.dir={tmp}/faithful",
+         "grep -q ',faithful,' {tmp}/faithful/results.csv"],
     ".venv/bin/python -m bench dataset=maroon dataset.root=/data/maroon method=mm2fsk freq=d10 prior=realsense":
         ["{py} -m bench dataset=maroon dataset.root=/data/maroon method=mm2fsk freq=d10 prior=realsense --cfg job"],
     ".venv/bin/python -m bench.tables table1 [--csv FILE] [--latex FILE]":
