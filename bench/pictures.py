@@ -357,21 +357,34 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
     return path
 
 
+def _capture_pictures(runs: list[tuple[str, Path]], stem: str, out_dir: Path, prior_m: np.ndarray | None,
+                      ply: bool, use: str) -> dict[str, Path]:
+    """Both figures (and the PLY files) of one capture; runs in a worker process of sweep_pictures."""
+    cells = [(label, arrays) for label, path in runs if (arrays := read_arrays(path, stem)) is not None]
+    return {"point_clouds": point_cloud_figure(cells, stem, out_dir / "point_clouds" / f"{stem}.png",
+                                               out_dir / "point_clouds" if ply else None, use=use),
+            "panel": capture_panel(cells, stem, out_dir / "panels" / f"{stem}.png", prior_m)}
+
+
 def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str, np.ndarray] | None = None,
-                   ply: bool = True) -> dict[str, dict[str, Path]]:
+                   ply: bool = True, workers: int | None = None) -> dict[str, dict[str, Path]]:
     """Point-cloud figures (+ PLY) and panels of every capture of the runs ((label, arrays.h5) pairs) under
-    `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}."""
+    `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}. Captures
+    are drawn in `workers` processes (default: one per CPU core; matplotlib draws on one core)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
     from bench.progress import bar
 
     use = renderer()
-    written = {}
     stems = capture_stems([path for _, path in runs])
-    with bar(len(stems), f"pictures ({use})", unit="capture") as progress:
-        for stem in stems:
-            cells = [(label, arrays) for label, path in runs if (arrays := read_arrays(path, stem)) is not None]
-            written[stem] = {
-                "point_clouds": point_cloud_figure(cells, stem, out_dir / "point_clouds" / f"{stem}.png",
-                                                   out_dir / "point_clouds" if ply else None, use=use),
-                "panel": capture_panel(cells, stem, out_dir / "panels" / f"{stem}.png", (priors or {}).get(stem))}
+    workers = max(1, min(len(stems), workers or os.cpu_count() or 1))
+    written = {}
+    with bar(len(stems), f"pictures ({use})", unit="capture") as progress, \
+            ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = {stem: pool.submit(_capture_pictures, runs, stem, out_dir, (priors or {}).get(stem), ply, use)
+                   for stem in stems}
+        for stem, future in futures.items():
+            written[stem] = future.result()
             progress.update()
     return written
