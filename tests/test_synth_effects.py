@@ -257,3 +257,26 @@ def test_app_names_a_bad_preset_or_setting_in_one_line(tmp_path):
             _ensure_synthetic(dataset, tmp_path / "root", OmegaConf.create(synth))
         assert err.value.what == "synth"
     assert not (tmp_path / "root").exists()                     # nothing generated, nothing claimed
+
+
+def test_skipped_sideways_samples_change_the_frame_by_less_than_1e4():
+    """radar_scene skips samples whose lobe gain towards every antenna is < 1e-2: the frame of a cylinder's flank
+    with and without them agrees to 1e-4 of its peak."""
+    from bench.antennas import load_antenna_array
+    from bench.synth import radar_scene
+    from bench.synth.sampling import SurfaceSamples
+
+    antennas = load_antenna_array()
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 400)                 # a half cylinder r = 4 cm facing the array
+    points = np.column_stack([0.04 * np.sin(angles), np.zeros_like(angles), 0.30 - 0.04 * np.cos(angles)])
+    normals = np.column_stack([np.sin(angles), np.zeros_like(angles), -np.cos(angles)])
+    samples = SurfaceSamples(points, normals, np.full(len(points), 1e-6), np.zeros(len(points), dtype=np.int64))
+    lobe = np.deg2rad([MATERIALS["plastic"].lobe_deg])
+    keep = radar_scene._audible(samples, lobe, np.concatenate([antennas.rx_m, antennas.tx_m]))
+    assert 0 < (~keep).sum() < len(keep)
+    freqs = np.array([77e9])
+    full = simulate_frame(points, samples.areas_m2, antennas.tx_m, antennas.rx_m, freqs, normals,
+                          np.repeat(lobe, len(points)))
+    config = dataclasses.replace(SynthConfig(), scattering="specular")
+    skipped = radar_scene._simulate(samples, samples.areas_m2, points, lobe, config, antennas, freqs)
+    assert np.abs(skipped - full).max() < 1e-4 * np.abs(full).max()
