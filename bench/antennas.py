@@ -6,29 +6,17 @@ that the reference code drops, so the data axes of a frame (`xr[rx, tx, f]`, sli
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from bench import safe_io
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
+from methods.domain.antennas import AntennaArray
 
 N_STORED = 96          # rows in Tx.dat / Rx.dat and size of the stored frame axes
 USED = slice(1, 95)    # elements used for imaging (94 per side)
-
-
-@dataclass(frozen=True)
-class AntennaArray:
-    """Antenna positions in radar space, metres. `tx_m[t]` belongs to frame axis 1, `rx_m[r]` to axis 0."""
-
-    tx_m: np.ndarray  # (n_tx, 3) float64
-    rx_m: np.ndarray  # (n_rx, 3) float64
-
-    @property
-    def n_pairs(self) -> int:
-        return len(self.tx_m) * len(self.rx_m)
 
 
 def file_to_radar_space(xyz_file_m: np.ndarray) -> np.ndarray:

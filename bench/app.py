@@ -28,8 +28,8 @@ from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli, maroon
 from bench.antennas import load_antenna_array
-from bench.capture import Capture, RadarGrid
-from bench.errors import DatasetError
+from methods.domain.capture import Capture, RadarGrid
+from methods.domain.errors import DatasetError
 from bench.frames import parse_frame_spec, select_frames
 from bench.grids import grid_for
 from bench.results import write_depth, write_results

@@ -20,7 +20,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 
 EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from bench.capture import Capture, RadarGrid
+from methods.domain.capture import Capture, RadarGrid
 from bench.limits import current_limits
 
 

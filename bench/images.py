@@ -14,7 +14,7 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from bench import safe_io
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 from bench.limits import current_limits, too_large
 
 _UINT16_MODES = {"I;16", "I;16B", "I;16L", "I"}

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 
 from bench import maroon
-from bench.alignment import apply_transform
-from bench.capture import Capture
+from methods.domain.transforms import apply_transform
+from methods.domain.capture import Capture
 from bench.cli import ArgumentParser, run_guarded
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 from bench.reference_check import reference_expectations
 
 

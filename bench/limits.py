@@ -23,7 +23,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 
 KIB, MIB, GIB = 1 << 10, 1 << 20, 1 << 30
 ENV_VAR = "BENCH_LIMITS"

@@ -24,9 +24,10 @@ import numpy as np
 
 from bench import safe_io
 from bench.alignment import read_alignment
-from bench.antennas import N_STORED, USED, AntennaArray, load_antenna_array
-from bench.capture import CameraIntrinsics, Capture, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
-from bench.errors import DatasetError, display_path
+from bench.antennas import N_STORED, USED, load_antenna_array
+from methods.domain.antennas import AntennaArray
+from methods.domain.capture import CameraIntrinsics, Capture, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
+from methods.domain.errors import DatasetError, display_path
 from bench.frames import Pairing, pair_nearest, realsense_times_s, select_frames, timing_files
 from bench.images import read_binary_mask, read_uint16_png
 from bench.jsonio import read_json

@@ -32,7 +32,7 @@ import numpy as np
 
 from bench import cli
 from bench.antennas import load_antenna_array
-from bench.capture import CameraIntrinsics, Capture, DepthFrame, Metadata, RadarFrame, RadarGrid
+from methods.domain.capture import CameraIntrinsics, Capture, DepthFrame, Metadata, RadarFrame, RadarGrid
 from methods import reconstruct
 from methods.correlate import C_M_PER_S
 

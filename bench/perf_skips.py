@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 from methods.skips import ALL, NONE, SKIP_NAMES, SkipSettings, default_for
 
 DEPTH_TOL_M = 1e-4              # 0.1 mm

@@ -23,7 +23,7 @@ import numpy as np
 import yaml
 
 from bench import cli
-from bench.capture import Capture, RadarGrid
+from methods.domain.capture import Capture, RadarGrid
 from bench.grids import grid_for
 from bench.maroon import discover_captures, read_capture
 from bench.perf_frames import DEFAULT_OUT, write_rows

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bench import maroon, safe_io
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 
 REFERENCE_RADAR_FOLDER = "radar_72.0_82.0_128"     # built by the viewer from its config (72, 82 GHz, 128 points)
 MESH_STEMS = ("mesh_masked", "mesh")               # the viewer's choice with masks on, then its fallback

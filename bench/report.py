@@ -155,7 +155,7 @@ def _realsense_priors(root: Path, stems: list[str]) -> dict[str, np.ndarray]:
     """The RealSense prior (m, on each capture's metric grid) of the captures, where the sweep's dataset can still
     be read here; an unreadable capture simply has no prior in its panel."""
     from bench import maroon
-    from bench.errors import DatasetError
+    from methods.domain.errors import DatasetError
     from methods.api import prior_image_m
 
     jobs = _job_dirs(root)

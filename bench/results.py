@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 from bench.images import write_uint16_png
 
 RESULT_COLUMNS = ["object", "distance", "frame", "method", "freq", "prior", "f_GHz", "C_g_cm", "C_s_cm", "P_cm",

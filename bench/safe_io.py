@@ -20,7 +20,7 @@ import stat
 from collections.abc import Iterator
 from pathlib import Path
 
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 from bench.limits import current_limits, too_large
 
 KINDS = {"frame": "frame_bytes", "json": "json_bytes", "image": "image_bytes", "mesh": "mesh_bytes",

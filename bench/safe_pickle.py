@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from bench import safe_io
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 from bench.limits import current_limits, too_large
 
 _MAGIC = b"\x93NUMPY"

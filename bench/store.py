@@ -36,7 +36,7 @@ from bench import maroon, safe_io
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 CODE_DIRS = ("methods", "metrics")                                     # every .py file in these
-CODE_FILES = ("bench/maroon.py", "bench/capture.py", "bench/grids.py", "bench/alignment.py", "bench/antennas.py",
+CODE_FILES = ("bench/maroon.py", "bench/grids.py", "bench/alignment.py", "bench/antennas.py",
               "bench/images.py", "bench/safe_pickle.py", "bench/frames.py")               # the reader shapes results too
 ARRAY_NAMES = ("depth_m", "magnitude", "gt_depth_m")
 RACY_S = 1.0            # a digest is cached only for files unchanged for this long before hashing (see above)

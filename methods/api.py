@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from bench.capture import Capture, RadarGrid
+from methods.domain.capture import Capture, RadarGrid
 from methods.backend import Backend, backend_for
 from methods.filtering import DEFAULT_THRESHOLD_DB
 from methods.frequencies import config_indices, select_frequencies

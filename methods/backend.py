@@ -22,7 +22,7 @@ import functools
 
 import numpy as np
 
-from bench.capture import DepthFrame, Mesh, RadarGrid
+from methods.domain.capture import DepthFrame, Mesh, RadarGrid
 from methods.prior import mesh_prior_m, realsense_prior_m
 from methods.prior_image import HostPrior, Prior
 

@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.antennas import AntennaArray
-from bench.capture import RadarGrid
+from methods.domain.antennas import AntennaArray
+from methods.domain.capture import RadarGrid
 from methods import bp_search, range_cpu
 from methods.backend import Backend, backend_for
 from methods.depth_peak import peak_depth_m

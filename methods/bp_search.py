@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.antennas import AntennaArray
+from methods.domain.antennas import AntennaArray
 from methods.correlate import C_M_PER_S
 from methods.roi import Roi, dilate, lattice
 

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.antennas import AntennaArray
-from bench.capture import RadarGrid
+from methods.domain.antennas import AntennaArray
+from methods.domain.capture import RadarGrid
 from methods.backend import Backend, backend_for
 from methods.correlate import C_M_PER_S
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth

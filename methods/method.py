@@ -25,8 +25,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from bench.antennas import AntennaArray
-from bench.capture import RadarGrid
+from methods.domain.antennas import AntennaArray
+from methods.domain.capture import RadarGrid
 from methods.backend import Backend
 from methods.filtering import DEFAULT_THRESHOLD_DB
 from methods.prior_image import Prior

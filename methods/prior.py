@@ -30,8 +30,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
-from bench.alignment import apply_transform
-from bench.capture import DepthFrame, Mesh, RadarGrid
+from methods.domain.transforms import apply_transform
+from methods.domain.capture import DepthFrame, Mesh, RadarGrid
 from methods.raster import fill_convex_hull, rasterize_nearest_z
 from metrics.triangulation import lattice_triangles
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 
 
 class Prior:

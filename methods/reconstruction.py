@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 
 
 @dataclass

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 
 
 @dataclass(frozen=True)

@@ -34,8 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.alignment import apply_transform
-from bench.capture import Capture, RadarGrid
+from methods.domain.transforms import apply_transform
+from methods.domain.capture import Capture, RadarGrid
 from bench.maroon import reference_mask_bb_m
 from metrics.chamfer import PointSet, nearest_distances_m, one_sided_chamfer_m
 from metrics.groundtruth import rasterise_depth_m

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 
 
 def rasterise_depth_m(vertices_m: np.ndarray, triangles: np.ndarray, grid: RadarGrid,

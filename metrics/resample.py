@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 
 SURFACE_JUMP_M = 0.01     # = metrics.evaluate.TRIANGULATION_THRESHOLD_M: one surface for the triangulation
 

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.antennas import AntennaArray, load_antenna_array
-from bench.capture import Capture, CameraIntrinsics, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
+from methods.domain.antennas import AntennaArray
+from bench.antennas import load_antenna_array
+from methods.domain.capture import Capture, CameraIntrinsics, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
 from methods.correlate import C_M_PER_S
 
 ANTENNAS = load_antenna_array()

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from bench import maroon
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 from bench.frames import pair_nearest, parse_frame_spec, realsense_times_s, select_frames
 from bench.store import capture_files
 from bench.tables import summarise

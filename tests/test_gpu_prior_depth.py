@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.capture import Mesh, RadarGrid
+from methods.domain.capture import Mesh, RadarGrid
 from methods import reconstruct
 from methods.backend import backend_for
 from methods.depth_peak import peak_depth_m

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from bench import maroon
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 from bench.store import Store, capture_files
 from bench.synth import SynthConfig, generate_capture
 from bench.synth.ownership import ForeignRootError

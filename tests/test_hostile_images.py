@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bench import maroon
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 from bench.images import read_binary_mask, read_uint16_png
 from bench.limits import Limits, use_limits
 from bench.stress import hostile_inputs as hi

@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from bench import maroon
-from bench.capture import RadarGrid
-from bench.errors import DatasetError
+from methods.domain.capture import RadarGrid
+from methods.domain.errors import DatasetError
 from bench.jsonio import nesting_depth, read_json
 from bench.limits import Limits, parse_limits, use_limits
 from bench.stress import hostile_inputs as hi

@@ -14,7 +14,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 from bench.app import CONFIG_DIR, run
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 from hostile_tools import RADAR, bounded, copy_capture, frame_file, tree_digest
 from metrics.evaluate import METRIC_COLUMNS
 

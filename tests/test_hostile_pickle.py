@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from bench import maroon
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 from bench.limits import Limits, use_limits
 from bench.safe_pickle import load_pickled_dict
 from bench.stress import hostile_inputs as hi

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 from methods import reconstruct
 from methods.bp import peak_depth_m
 from methods_scenes import MAROON_FREQS_HZ, TABLE1_FREQS_HZ, make_capture, plate_points_m, simulate

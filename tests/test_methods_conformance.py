@@ -110,8 +110,10 @@ def test_a_method_that_cannot_be_used_is_one_clear_error(spec, message):
 
 def test_parameters_have_defaults_and_unknown_ones_are_refused():
     assert make_method("bp").values == {"band_m": 0.05} and make_method("bp", {"band_m": 0.02}).values["band_m"] == 0.02
-    with pytest.raises(MethodError, match="unknown parameter.s. alpha for mm2fsk; allowed: none"):
+    allowed = ", ".join(sorted(method_class("mm2fsk").params)) or "none"
+    with pytest.raises(MethodError) as err:
         make_method("mm2fsk", {"alpha": 1})
+    assert str(err.value) == f"unknown parameter(s) alpha for mm2fsk; allowed: {allowed}"
 
 
 def _bench(*overrides: str) -> subprocess.CompletedProcess:

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.capture import Mesh, RadarGrid
+from methods.domain.capture import Mesh, RadarGrid
 from methods import reconstruct
 from methods_scenes import TABLE1_FREQS_HZ, make_capture, simulate
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.capture import Mesh
+from methods.domain.capture import Mesh
 from methods.prior import mesh_prior_m, realsense_prior_m
 from methods.raster import fill_convex_hull, rasterize_nearest_z
 from methods_scenes import CAMERA, plane_depth_frame, realsense2radar, square_grid

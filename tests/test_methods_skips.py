@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 from methods import reconstruct
 from methods import range_compression
 from methods.bp import peak_depth_m

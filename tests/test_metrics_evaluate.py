@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bench.antennas import load_antenna_array
-from bench.capture import Capture, Mesh, Metadata, RadarGrid
+from methods.domain.capture import Capture, Mesh, Metadata, RadarGrid
 from metrics.evaluate import METRIC_COLUMNS, evaluate, ground_truth
 
 GRID = RadarGrid((-0.15, -0.15, 0.2), (0.15, 0.15, 0.4), (301, 301, 201))

@@ -17,7 +17,7 @@ import pytest
 from scipy.spatial.distance import cdist
 
 from bench.antennas import load_antenna_array
-from bench.capture import Capture, Mesh, Metadata, RadarGrid
+from methods.domain.capture import Capture, Mesh, Metadata, RadarGrid
 from bench.maroon import read_metadata, reference_mask_bb_m
 from metrics.evaluate import evaluate, ground_truth
 from metrics.triangulation import triangulated_vertices

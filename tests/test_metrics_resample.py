@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 from metrics.evaluate import evaluate, ground_truth
 from metrics.resample import resample_depth_m, resample_nearest
 from tests.test_metrics_evaluate import GRID, PLATE_Z_M, _plate_capture

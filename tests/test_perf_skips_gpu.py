@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.capture import CameraIntrinsics, DepthFrame
+from methods.domain.capture import CameraIntrinsics, DepthFrame
 from bench.perf_skips_gpu import agreement, new_frame
 from methods_scenes import make_capture, square_grid
 

@@ -16,10 +16,10 @@ import pytest
 from PIL import Image
 
 from bench import maroon
-from bench.alignment import transform_between
+from methods.domain.transforms import transform_between
 from bench.antennas import load_antenna_array, read_antenna_file
-from bench.capture import RadarGrid
-from bench.errors import DatasetError
+from methods.domain.capture import RadarGrid
+from methods.domain.errors import DatasetError
 from bench.safe_pickle import load_pickled_dict
 
 CAPTURE = "01_plate/30"

@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from bench import maroon
-from bench.alignment import apply_transform
+from methods.domain.transforms import apply_transform
 from bench.inspect import inspect_capture
 from bench.reference_check import reference_expectations
 

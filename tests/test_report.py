@@ -167,7 +167,7 @@ def test_report_cli_mistakes_are_one_line(tmp_path):
 def test_depth_preview_beside_the_16_bit_data_is_viewable(tmp_path):
     from PIL import Image
 
-    from bench.capture import RadarGrid
+    from methods.domain.capture import RadarGrid
     from bench.results import write_depth
 
     depth = np.tile(np.linspace(0.25, 0.35, 50), (40, 1))         # depth grows to the right

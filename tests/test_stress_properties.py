@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from bench import maroon
-from bench.capture import Mesh, RadarGrid
-from bench.errors import DatasetError
+from methods.domain.capture import Mesh, RadarGrid
+from methods.domain.errors import DatasetError
 from metrics.evaluate import METRIC_COLUMNS, TRIANGULATION_THRESHOLD_M, evaluate, ground_truth
 from metrics.triangulation import triangulated_vertices
 from methods_scenes import make_capture, square_grid

@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from bench.antennas import load_antenna_array
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 from bench.synth import SynthConfig, ensure_capture, generate_catalogue, simulate_frame
 from bench.synth import generate as generate_module
 from bench.synth.meshes import extrude_strip, indexed, triangle_normals

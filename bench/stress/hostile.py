@@ -24,8 +24,8 @@ from typing import Callable
 import numpy as np
 
 from bench import maroon
-from bench.capture import Capture
-from bench.errors import DatasetError
+from methods.domain.capture import Capture
+from methods.domain.errors import DatasetError
 from bench.stress import hostile_inputs
 from methods import reconstruct
 from methods.frequencies import config_indices

@@ -22,7 +22,7 @@ import dataclasses
 
 import numpy as np
 
-from bench.capture import CameraIntrinsics, DepthFrame, RadarGrid
+from methods.domain.capture import CameraIntrinsics, DepthFrame, RadarGrid
 from bench.stress.scenes import antennas, config_freqs_hz, dd_max_m, pixel_grid
 from bench.synth import SynthConfig, build_scene, simulate_frame
 from bench.synth import depth_camera

@@ -9,8 +9,9 @@ from functools import cache
 
 import numpy as np
 
-from bench.antennas import AntennaArray, load_antenna_array
-from bench.capture import RadarGrid
+from methods.domain.antennas import AntennaArray
+from bench.antennas import load_antenna_array
+from methods.domain.capture import RadarGrid
 from bench.synth import simulate_frame
 from methods.frequencies import config_indices, max_unambiguous_depth_m
 

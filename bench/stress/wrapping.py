@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.capture import RadarGrid
+from methods.domain.capture import RadarGrid
 from bench.stress.scenes import MAROON_FREQS_HZ, antennas, config_freqs_hz, dd_max_m, frame, pixel_grid, \
     plate_points_m
 from methods.frequencies import config_indices

@@ -25,7 +25,7 @@ import stat
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from bench.errors import DatasetError
+from methods.domain.errors import DatasetError
 
 MANIFEST_NAME = "synth_manifest.json"
 LOCK_NAME = ".synth.lock"

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from bench.alignment import apply_transform
-from bench.capture import DepthFrame, Mesh, RadarGrid
+from methods.domain.transforms import apply_transform
+from methods.domain.capture import DepthFrame, Mesh, RadarGrid
 from methods.prior_image import Prior
 from methods.prior import DEFAULT_MAX_JUMP_MM
 from methods.warp_backend import prior_kernels as kernels

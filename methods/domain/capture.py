@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.antennas import AntennaArray
+from methods.domain.antennas import AntennaArray
 
 
 @dataclass(frozen=True)
