@@ -181,3 +181,25 @@ def test_depth_preview_beside_the_16_bit_data_is_viewable(tmp_path):
     info = json.loads((tmp_path / "depth" / "cap.json").read_text())["preview"]
     assert info["vmin_m"] == pytest.approx(np.percentile(depth[5:], 1))
     assert np.asarray(Image.open(tmp_path / "depth" / "cap.png")).dtype == np.uint16   # the data is unchanged
+
+
+def test_console_entry_points_run_the_python_m_commands():
+    import sys
+    from pathlib import Path
+
+    bin_dir = Path(sys.executable).parent
+    if not (bin_dir / "mm2fsk-tables").exists():
+        pytest.skip("console scripts not installed in this environment (pip install -e . installs them)")
+    table = subprocess.run([str(bin_dir / "mm2fsk-tables"), "table1"], capture_output=True, text=True, timeout=120)
+    assert table.returncode == 0 and "| d05 | 0.55 |" in table.stdout
+    completion = subprocess.run([str(bin_dir / "mm2fsk-bench"), "-sc", "install=bash"], capture_output=True,
+                                text=True, timeout=120)
+    assert completion.returncode == 0 and completion.stdout.rstrip().endswith("hydra_bash_completion mm2fsk-bench")
+
+
+def test_progress_bars_are_quiet_when_output_is_not_a_terminal(capsys):
+    from bench.progress import bar
+
+    with bar(3, "steps") as progress:          # pytest captures stderr: not a terminal
+        progress.update(3)
+    assert progress.disable and capsys.readouterr().err == ""
