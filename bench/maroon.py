@@ -141,8 +141,9 @@ def read_metadata(capture_dir: Path) -> Metadata:
     if not isinstance(bb, dict) or set(bb) - set(_MASK_BB_KEYS):
         raise DatasetError(path, f"mask_bb must be a dict with keys among {', '.join(_MASK_BB_KEYS)}")
     mask_bb_m = {key: _number(path, value, f"mask_bb.{key}") for key, value in bb.items()}
-    if "mask_3d_threshold" in raw and "zmax" not in mask_bb_m:  # legacy form of mask_bb.zmax (section 8)
-        mask_bb_m["zmax"] = _number(path, raw["mask_3d_threshold"], "mask_3d_threshold")
+    if "mask_3d_threshold" in raw:  # legacy form of mask_bb.zmax (section 8): ours keeps zmax when both are given
+        legacy_zmax_m = _number(path, raw["mask_3d_threshold"], "mask_3d_threshold")
+        mask_bb_m.setdefault("zmax", legacy_zmax_m)
     if distance_m == 0.3 and "zmin" not in mask_bb_m:
         mask_bb_m["zmin"] = 0.26
     mask_bb_m.setdefault("zmax", 0.7)
@@ -158,6 +159,16 @@ def read_metadata(capture_dir: Path) -> Metadata:
     return Metadata(distance_m=distance_m, mask_erosion=erosion, mask_bb_m=mask_bb_m,
                     calibration=calibration if isinstance(calibration, str) else None,
                     labels=tuple(str(label) for label in labels) if isinstance(labels, list) else (), raw=raw)
+
+
+def reference_mask_bb_m(metadata: Metadata) -> dict[str, float]:
+    """`mask_bb` as the reference viewer applies it (faithful profile): a legacy `mask_3d_threshold` sets zmax
+    even where `mask_bb.zmax` is given too (the viewer migrates the threshold over it); read_metadata keeps the
+    explicit `mask_bb.zmax`, the newer field, instead."""
+    mask_bb_m = dict(metadata.mask_bb_m)
+    if "mask_3d_threshold" in metadata.raw:            # validated by read_metadata
+        mask_bb_m["zmax"] = float(metadata.raw["mask_3d_threshold"])
+    return mask_bb_m
 
 
 def alignment_path(capture_dir: Path, metadata: Metadata) -> Path:
