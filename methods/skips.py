@@ -85,8 +85,9 @@ def default_for(method: str, n_freqs: int, device: str = "cpu") -> SkipSettings:
     5 %), for no time saved. On Warp devices ("cuda", "warp-cpu") the dense kernels are cheaper than the host-driven
     searches for few frequencies (H100, new frames, catalogue at 30 cm: two-frequency BP 792 ms with the coarse
     ROI and coarse-to-fine search against 41 ms for the whole volume; 2FSK d05 18.5 ms with `fsk_keep` against
-    9.9 ms; 3FSK 21.8 against 16.5 ms), so there only `mask_bb` stays on for them; BP with many frequencies keeps
-    the coarse ROI and the search (292 against 527 ms)."""
+    9.9 ms; 3FSK 21.8 against 16.5 ms; two-frequency BP with the coarse ROI evaluated as the dense volume over its
+    bounding box, bp._box_depth_m, 54.8 against 40.5 ms), so there only `mask_bb` stays on for them; BP with many
+    frequencies keeps the coarse ROI and the search (145 against 519 ms, notes/gpu.md)."""
     if method == "bp":
         if device != "cpu" and n_freqs <= 3:
             return SkipSettings(mask_bb=True)
