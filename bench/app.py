@@ -342,8 +342,6 @@ def main(cfg: DictConfig) -> None:
         cli.exit_on_closed_stdout()
     except MissingMandatoryValue as err:
         cli.fail(f"the setting '{err.full_key}' is required (e.g. {err.full_key}=/path/to/maroon)")
-    except ValueError as err:  # invalid combination of method, frequencies and prior
-        cli.fail(str(err))
     except Exception as err:   # noqa: BLE001 -- dataset, path, device and file errors in one line; bugs re-raised
         message = cli.error_line(err)
         if message is None:

@@ -1,7 +1,8 @@
 """Shared command-line behaviour: a user mistake ends in one line `error: <what>: <what is wrong>` on stderr and a
 non-zero exit, never a traceback.
 
-* `run_guarded(main)` runs an entry point: a DatasetError (bad data), a UserError (bad argument or path), an
+* `run_guarded(main)` runs an entry point: a DatasetError (bad data), a UserError (bad argument or path), a
+  UsageError (a request the methods refuse), an
   OSError naming a file (cannot read or write it) or an unusable device -> one line on stderr, exit 2;
   Ctrl-C -> `interrupted`, exit 130; a closed stdout (`python -m bench.tables table3 | head -1`) -> nothing more is
   written and the exit code is 141 (128 + SIGPIPE, what the shell reports for a tool killed by a closed pipe, so
@@ -20,7 +21,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from methods.domain.errors import DatasetError
+from methods.domain.errors import DatasetError, UsageError
 
 EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130
@@ -39,7 +40,7 @@ def error_line(err: BaseException) -> str | None:
     """The one-line message (without `error: `) for an error a user can fix, or None for a bug."""
     from methods.backend import DeviceUnavailableError
 
-    if isinstance(err, (DatasetError, UserError)):
+    if isinstance(err, (DatasetError, UserError, UsageError)):
         return str(err)
     if isinstance(err, DeviceUnavailableError):
         return f"device={err.device}: {err.problem} (use device=cpu or device=auto)"

@@ -19,6 +19,7 @@ import numpy as np
 
 from methods.domain.capture import Capture, RadarGrid
 from methods.backend import Backend, backend_for
+from methods.domain.errors import UsageError
 from methods.filtering import DEFAULT_THRESHOLD_DB
 from methods.frequencies import config_indices, select_frequencies
 from methods.fsk import DEFAULT_PRIOR_M
@@ -40,16 +41,16 @@ def parse_prior(prior: str | float | None) -> str | float | None:
     try:
         value = float(prior)
     except (TypeError, ValueError):
-        raise ValueError(f"prior must be 'none', 'realsense', 'photogrammetry' or a depth in metres, "
+        raise UsageError(f"prior must be 'none', 'realsense', 'photogrammetry' or a depth in metres, "
                          f"got {prior!r}") from None
     if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"a scalar prior is a depth in metres in front of the array (> 0), got {prior!r}")
+        raise UsageError(f"a scalar prior is a depth in metres in front of the array (> 0), got {prior!r}")
     return value
 
 
 def _transform(capture: Capture, key: str) -> np.ndarray:
     if key not in capture.transforms:
-        raise ValueError(f"capture {capture.name} has no '{key}' transform in its alignment "
+        raise UsageError(f"capture {capture.name} has no '{key}' transform in its alignment "
                          f"(available: {', '.join(sorted(capture.transforms)) or 'none'})")
     return capture.transforms[key]
 
@@ -62,12 +63,12 @@ def prior_image_m(capture: Capture, source: str, grid: RadarGrid, device: str | 
     notes = f" ({'; '.join(capture.notes)})" if capture.notes else ""
     if source == "realsense":
         if capture.realsense is None:
-            raise ValueError(f"prior='realsense' needs a RealSense depth frame, but capture {capture.name} "
+            raise UsageError(f"prior='realsense' needs a RealSense depth frame, but capture {capture.name} "
                              f"has none{notes}")
         return backend.realsense_prior(capture.realsense, _transform(capture, "realsense2radar"), grid,
                                        keep_on_device)
     if capture.mesh is None:
-        raise ValueError(f"prior='photogrammetry' needs the photogrammetry mesh, but capture {capture.name} "
+        raise UsageError(f"prior='photogrammetry' needs the photogrammetry mesh, but capture {capture.name} "
                          f"has none{notes}")
     return backend.mesh_prior(capture.mesh, _transform(capture, "photogrammetry2radar"), grid, keep_on_device)
 
@@ -84,16 +85,16 @@ def frequency_indices(freqs_hz: np.ndarray, freq: str | Sequence[float] | None) 
 def _check_frequencies_hz(capture: Capture, freqs_hz: np.ndarray) -> None:
     """Refuse a frequency vector that is not finite or not in Hz (e.g. in GHz)."""
     if freqs_hz.size == 0:
-        raise ValueError(f"capture {capture.name} has no frequencies")
+        raise UsageError(f"capture {capture.name} has no frequencies")
     if not np.all(np.isfinite(freqs_hz)) or freqs_hz.min() < 1e9:
-        raise ValueError(f"the frequencies of capture {capture.name} must be finite and in Hz (>= 1 GHz), found "
+        raise UsageError(f"the frequencies of capture {capture.name} must be finite and in Hz (>= 1 GHz), found "
                          f"{freqs_hz.min():g}-{freqs_hz.max():g} (in GHz? multiply by 1e9)")
 
 
 def _check_signal(capture: Capture, signal: np.ndarray) -> None:
     """Refuse a radar frame with NaN or Inf samples (it would turn every depth into a silent NaN)."""
     if not np.all(np.isfinite(signal)):
-        raise ValueError(f"the radar frame of capture {capture.name} has NaN or Inf samples")
+        raise UsageError(f"the radar frame of capture {capture.name} has NaN or Inf samples")
 
 
 def capture_roi(capture: Capture, grid: RadarGrid, skips: SkipSettings) -> Roi:
@@ -126,12 +127,12 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     A sensor prior that covers no radar pixel (empty mask, object outside the grid) gives an explicit all-invalid
     result: every depth NaN and `invalid_reason` saying why; so does a frame without signal (all zero).
     `invalid_reason` is None when some pixel is valid. A frame with NaN/Inf samples or frequencies not in Hz, and
-    a combination the method does not accept (methods.method.MethodError), raise ValueError.
+    a combination the method does not accept (methods.method.MethodError), raise UsageError (a ValueError).
     """
     method = make_method(method, params)
     frame = capture.radar
     if frame is None:
-        raise ValueError(f"capture {capture.name} has no radar frame loaded")
+        raise UsageError(f"capture {capture.name} has no radar frame loaded")
     _check_frequencies_hz(capture, np.asarray(frame.freqs_hz, dtype=np.float64))
     indices = frequency_indices(frame.freqs_hz, freq)
     prior_value = parse_prior(prior)

@@ -24,6 +24,7 @@ from methods.domain.capture import RadarGrid
 from methods import bp_search, range_cpu
 from methods.backend import Backend, backend_for
 from methods.depth_peak import peak_depth_m
+from methods.domain.errors import UsageError
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
 from methods.method import Frame, Method, MethodError
 from methods.prior_image import Prior
@@ -185,7 +186,7 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
     backend = backend_for(backend)
     z_m = grid.z_m
     if len(z_m) < 2:
-        raise ValueError("BP needs a z grid with at least two samples")
+        raise UsageError("BP needs a z grid with at least two samples")
     dz_m = float(z_m[1] - z_m[0])
     roi = roi if roi is not None else full_roi(grid)
     extra: dict = {"band_m": None if prior_m is None else band_m}
@@ -198,7 +199,7 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
         if prior_m is not None:
             z_m = z_m[np.abs(z_m - prior_m) <= band_m + 1e-9]
             if len(z_m) == 0:
-                raise ValueError(f"no z sample of the grid lies within {band_m} m of the prior {prior_m} m")
+                raise UsageError(f"no z sample of the grid lies within {band_m} m of the prior {prior_m} m")
         z_outer = z_m                          # the depths today's computation searches (grid, or prior band)
         z_m = z_outer[roi.z_indices(z_outer)]
         roi_cuts = not roi.pixels.all() or len(z_m) != len(z_outer)

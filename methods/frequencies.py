@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from methods.correlate import C_M_PER_S
+from methods.domain.errors import UsageError
 
 CONFIGS_GHZ: dict[str, tuple[float, ...] | None] = {
     "d05": (81.45, 82.00),
@@ -26,7 +27,7 @@ CONFIGS_GHZ: dict[str, tuple[float, ...] | None] = {
 def config_targets_ghz(name: str) -> tuple[float, ...] | None:
     """Target frequencies (GHz) of a named configuration; None for `full` (all frequencies)."""
     if name not in CONFIGS_GHZ:
-        raise ValueError(f"unknown frequency configuration {name!r}; choose one of {', '.join(CONFIGS_GHZ)}")
+        raise UsageError(f"unknown frequency configuration {name!r}; choose one of {', '.join(CONFIGS_GHZ)}")
     return CONFIGS_GHZ[name]
 
 
@@ -37,7 +38,7 @@ def select_frequencies(freqs_hz: np.ndarray, targets_ghz: tuple[float, ...] | li
     indices = np.argmin(np.abs(freqs_hz[None, :] - targets_hz[:, None]), axis=1)
     if len(np.unique(indices)) != len(indices):
         chosen = ", ".join(f"{t:.3f} GHz -> {freqs_hz[i] / 1e9:.3f} GHz" for t, i in zip(targets_ghz, indices))
-        raise ValueError(f"two target frequencies map to the same frame frequency ({chosen}); "
+        raise UsageError(f"two target frequencies map to the same frame frequency ({chosen}); "
                          "the frame's frequency sweep is too coarse for this configuration")
     return np.sort(indices)
 

@@ -28,6 +28,7 @@ import numpy as np
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
 from methods.backend import Backend
+from methods.domain.errors import UsageError
 from methods.filtering import DEFAULT_THRESHOLD_DB
 from methods.prior_image import Prior
 from methods.reconstruction import Reconstruction
@@ -39,7 +40,7 @@ PRIOR_KINDS = ("none", "scalar", "realsense", "photogrammetry")
 SENSOR_PRIORS = ("realsense", "photogrammetry")
 
 
-class MethodError(ValueError):
+class MethodError(UsageError):
     """A method that cannot be used as asked: unknown parameters, a frequency count or prior it does not accept, or
     a class that breaks the interface. The message is one line naming the method."""
 

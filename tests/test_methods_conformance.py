@@ -134,3 +134,15 @@ def test_a_method_of_ones_own_runs_from_the_command_line_and_gets_its_label(synt
                  "store.dir=null", f"hydra.run.dir={tmp_path / 'bad'}")
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
     assert "method 'nowhere.Mine' cannot be imported" in bad.stderr.strip().splitlines()[-1]
+
+
+def test_user_mistakes_are_usage_errors_and_bugs_keep_their_traceback(tilted_plate):
+    from bench.cli import error_line
+    from methods.domain.errors import UsageError
+    for mistake in ({"method": "2fsk", "freq": "d3"}, {"method": "2fsk", "freq": "d05", "prior": "lidar"},
+                    {"method": "mm2fsk", "freq": "d05", "prior": "photogrammetry"},
+                    {"method": "bp", "freq": "d05", "prior": 0.9}):
+        with pytest.raises(UsageError) as err:
+            reconstruct(tilted_plate, grid=GRID, **mistake)
+        assert error_line(err.value) == str(err.value)          # one line on the command line
+    assert error_line(ValueError("a bug")) is None               # re-raised with its traceback

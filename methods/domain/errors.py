@@ -1,4 +1,6 @@
-"""The one error type for bad dataset input: it names the file and says what is wrong."""
+"""The error types of a user's mistake: bad dataset input (`DatasetError`, naming the file) and a request the
+caller can fix (`UsageError`). Command lines print either as one line; any other exception is a bug and keeps
+its traceback (bench.cli.run_guarded)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -23,3 +25,8 @@ class DatasetError(Exception):
         self.path = Path(path)
         self.problem = problem
         super().__init__(f"{display_path(self.path)}: {problem}")
+
+
+class UsageError(ValueError):
+    """A request the caller can fix: an unknown configuration, method, prior or parameter, a combination a method
+    does not accept, or a capture that lacks what was asked of it. One line; a ValueError for older callers."""
