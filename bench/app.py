@@ -15,7 +15,6 @@ import inspect
 import logging
 import os
 import socket
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -167,9 +166,32 @@ def _method(cfg: DictConfig):
         raise cli.UserError("method._target_", "give the method's class, e.g. "
                                                "method._target_=mypkg.mymethod.MyMethod") from None
     try:
-        return make_method(target, OmegaConf.to_container(cfg.method.params))
+        return make_method(target, {**_profile_params(cfg, target), **OmegaConf.to_container(cfg.method.params)})
     except MethodError as err:
         raise cli.UserError(f"method._target_={target}", str(err)) from None
+
+
+def _profile_params(cfg: DictConfig, target: str) -> dict:
+    """The profile's method settings (configs/profile/) for a method that declares them: the 2FSK/MM-2FSK
+    filter quantity; `method.params` given on the command line win."""
+    from methods.registry import method_class
+
+    declared = method_class(target).params
+    return {"filter_quantity": str(cfg.profile.filter)} if "filter_quantity" in declared else {}
+
+
+def _prior_options(cfg: DictConfig) -> dict:
+    """How a sensor prior is built (methods.api.prior_image_m): the profile's construction and, for the RealSense,
+    the depth-jump rule `prior.max_jump_mm` (null = off; the default where the prior config does not set it)."""
+    from methods.prior import DEFAULT_MAX_JUMP_MM
+
+    options = {"faithful": cfg.profile.prior == "faithful"}
+    if cfg.prior.name == "realsense":
+        value = OmegaConf.select(cfg, "prior.max_jump_mm", default=DEFAULT_MAX_JUMP_MM)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0):
+            raise cli.UserError(f"prior.max_jump_mm={value}", "must be a positive number of millimetres or null")
+        options["max_jump_mm"] = None if value is None else float(value)
+    return options
 
 
 def _method_source(method) -> str | None:
@@ -188,6 +210,7 @@ def _cell(cfg: DictConfig, device: str, method) -> dict:
             "scalar_prior_m": float(cfg.prior.scalar_m), "grid": _container(cfg.grid.override),
             "threshold_db": float(cfg.threshold_db),
             "empty_filtered": bool(cfg.dataset.empty_filtered), "faithful": bool(cfg.metrics.faithful),
+            "profile": _container(cfg.profile), "prior_options": _prior_options(cfg),
             "device": device, "code": code_version()}
 
 
@@ -220,7 +243,7 @@ def _compute(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, device:
     targets_ghz = None if cfg.freq.f_ghz is None else [float(f) for f in cfg.freq.f_ghz]
     rec = methods.reconstruct(capture, method=method, freq=targets_ghz, prior=cfg.prior.name,
                               scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
-                              threshold_db=float(cfg.threshold_db))
+                              threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
     metric_grid = capture.radar.grid
     depth_m = resample_depth_m(rec.depth_m, rec.grid, metric_grid)
     if gt is not None:

@@ -24,7 +24,8 @@ from methods.filtering import DEFAULT_THRESHOLD_DB
 from methods.frequencies import config_indices, select_frequencies
 from methods.fsk import DEFAULT_PRIOR_M
 from methods.method import SENSOR_PRIORS, Frame, Method
-from methods.prior_image import Prior
+from methods.prior import DEFAULT_MAX_JUMP_MM, mesh_prior_m, realsense_prior_m
+from methods.prior_image import HostPrior, Prior
 from methods.reconstruction import Reconstruction
 from methods.registry import make_method
 from methods.roi import Roi, full_roi, intersect, roi_from_mask_bb
@@ -56,20 +57,31 @@ def _transform(capture: Capture, key: str) -> np.ndarray:
 
 
 def prior_image_m(capture: Capture, source: str, grid: RadarGrid, device: str | Backend = "cpu",
-                  keep_on_device: bool = False) -> Prior:
+                  keep_on_device: bool = False, max_jump_mm: float | None = DEFAULT_MAX_JUMP_MM,
+                  faithful: bool = False) -> Prior:
     """Per-pixel prior (ny, nx) in metres on `grid` from 'realsense' or 'photogrammetry' (NaN = no prior), as a
-    `Prior`: rasterised on the backend's device with `keep_on_device` where it can (np.asarray copies it back)."""
+    `Prior`: rasterised on the backend's device with `keep_on_device` where it can (np.asarray copies it back).
+
+    max_jump_mm (RealSense depth-jump rule, None = off) and faithful (the reference's construction) as in
+    methods.prior; other than the defaults they are built on the host."""
     backend = backend_for(device)
     notes = f" ({'; '.join(capture.notes)})" if capture.notes else ""
+    on_host = faithful or max_jump_mm != DEFAULT_MAX_JUMP_MM
     if source == "realsense":
         if capture.realsense is None:
             raise UsageError(f"prior='realsense' needs a RealSense depth frame, but capture {capture.name} "
                              f"has none{notes}")
+        if on_host:
+            return HostPrior(realsense_prior_m(capture.realsense, _transform(capture, "realsense2radar"), grid,
+                                               max_jump_mm=max_jump_mm, faithful=faithful), grid)
         return backend.realsense_prior(capture.realsense, _transform(capture, "realsense2radar"), grid,
                                        keep_on_device)
     if capture.mesh is None:
         raise UsageError(f"prior='photogrammetry' needs the photogrammetry mesh, but capture {capture.name} "
                          f"has none{notes}")
+    if faithful:
+        return HostPrior(mesh_prior_m(capture.mesh, _transform(capture, "photogrammetry2radar"), grid,
+                                      faithful=True), grid)
     return backend.mesh_prior(capture.mesh, _transform(capture, "photogrammetry2radar"), grid, keep_on_device)
 
 
@@ -113,7 +125,8 @@ def capture_roi(capture: Capture, grid: RadarGrid, skips: SkipSettings) -> Roi:
 def reconstruct(capture: Capture, method: str | type | Method, freq: str | Sequence[float] | None,
                 prior: str | float | None = "none", device: str | Backend = "cpu", grid: RadarGrid | None = None,
                 roi: str | dict | SkipSettings | None = "auto", threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                scalar_prior_m: float = DEFAULT_PRIOR_M, **params) -> Reconstruction:
+                scalar_prior_m: float = DEFAULT_PRIOR_M, prior_options: dict | None = None,
+                **params) -> Reconstruction:
     """Depth map of the capture's loaded radar frame with `method`: a built-in name (bp | 2fsk | 3fsk | mm2fsk |
     mm3fsk), a dotted class path, a `methods.method.Method` subclass or instance (methods.registry).
 
@@ -122,8 +135,9 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     prior: 'none', 'realsense', 'photogrammetry', or a scalar depth in metres; a method that needs a scalar prior
     gets `scalar_prior_m` (default 0.40 m) for 'none'. grid: overrides the frame's grid.
     roi: the skips and region of interest (module doc; 'none' = the full computation). threshold_db: the depth
-    filter, dB below the strongest pixel (default 14; None = off). params: the method's own parameters (its
-    `params`; e.g. band_m for BP with a prior).
+    filter, dB below the strongest pixel (default 14; None = off). prior_options: how a sensor prior is built
+    (`prior_image_m`'s max_jump_mm and faithful). params: the method's own parameters (its `params`; e.g. band_m
+    for BP with a prior, filter_quantity for 2FSK/MM-2FSK).
     A sensor prior that covers no radar pixel (empty mask, object outside the grid) gives an explicit all-invalid
     result: every depth NaN and `invalid_reason` saying why; so does a frame without signal (all zero).
     `invalid_reason` is None when some pixel is valid. A frame with NaN/Inf samples or frequencies not in Hz, and
@@ -152,7 +166,8 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     region = capture_roi(capture, grid, skips)
     if prior_value in SENSOR_PRIORS:
         with timer.stage("prior"):
-            run_prior = prior_image_m(capture, prior_value, grid, backend, keep_on_device=method.device_prior)
+            run_prior = prior_image_m(capture, prior_value, grid, backend, keep_on_device=method.device_prior,
+                                      **(prior_options or {}))
         if not run_prior.n_covered:          # an explicit all-invalid result (invalid_reason) below
             invalid_reason = f"the {prior_value} prior of capture {capture.name} covers no radar pixel"
     elif prior_value is None and "none" not in method.priors:

@@ -52,6 +52,18 @@ def mean_phasor_magnitude(phasors: np.ndarray) -> np.ndarray:
     return np.abs(phasors.mean(axis=0)).astype(np.float64)
 
 
+FILTER_QUANTITIES = ("mean", "first")
+
+
+def filter_magnitude(phasors: np.ndarray, quantity: str = "mean") -> np.ndarray:
+    """The 2FSK/MM-2FSK filter quantity of residual phasors (2, N): 'mean' = |mean of both frequencies| (the
+    paper's text, our default), 'first' = |first (lower) frequency's phasor| (the reference code's
+    extract_depth; profile=faithful)."""
+    if quantity not in FILTER_QUANTITIES:
+        raise ValueError(f"unknown filter_quantity {quantity!r}; choose one of {', '.join(FILTER_QUANTITIES)}")
+    return mean_phasor_magnitude(phasors) if quantity == "mean" else np.abs(phasors[0]).astype(np.float64)
+
+
 def first_pass_z1_m(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray,
                     y_m: np.ndarray, prior_m: float, backend: Backend, timer: StageTimer) -> tuple[float, dict]:
     """Pass 1 of 2FSK: correlate the pixels (x_m, y_m) (N,) at the scalar prior; the strongest pixel's correction
@@ -110,9 +122,9 @@ def finish(depth_m: np.ndarray, magnitude: np.ndarray, grid: RadarGrid, freqs_hz
 def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
                      backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE,
-                     timer: StageTimer | None = None) -> Reconstruction:
+                     timer: StageTimer | None = None, filter_quantity: str = "mean") -> Reconstruction:
     """2FSK depth map on `grid`'s pixels from a two-frequency frame `signal` (n_rx, n_tx, 2); `roi` (None = the
-    whole grid) and `skips.fsk_keep` as in the module doc."""
+    whole grid) and `skips.fsk_keep` as in the module doc; `filter_quantity` as in `filter_magnitude`."""
     if len(freqs_hz) != 2:
         raise ValueError(f"2FSK needs exactly two frequencies, got {len(freqs_hz)}")
     timer = timer or StageTimer()
@@ -130,7 +142,7 @@ def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
     def run(mask: np.ndarray) -> dict[str, np.ndarray]:
         depth_m, phasors = second_pass(signal, freqs_hz, antennas, x_img[mask], y_img[mask], z1_m, backend, timer)
         with timer.stage("filter"):
-            return {"depth_m": depth_m, "magnitude": mean_phasor_magnitude(phasors)}
+            return {"depth_m": depth_m, "magnitude": filter_magnitude(phasors, filter_quantity)}
 
     step_px, radius_px = skips.lattice_px(pixel_pitch_m(grid))
     evaluated, images = run_where_kept(pixels, run, threshold_db, step_px, skips.keep_margin_db, radius_px,
@@ -146,8 +158,9 @@ class TwoFSK(Method):
     label = "2FSK"
     n_freqs = 2
     priors = ("scalar",)
+    params = {"filter_quantity": "mean"}     # 'first': the reference code's filter (profile=faithful)
 
     def run(self, frame: Frame, prior: float, backend: Backend, timer: StageTimer) -> Reconstruction:
         return reconstruct_2fsk(frame.signal, frame.freqs_hz, frame.antennas, frame.grid, prior_m=prior,
                                 threshold_db=frame.threshold_db, backend=backend, roi=frame.roi, skips=frame.skips,
-                                timer=timer)
+                                timer=timer, filter_quantity=self.values["filter_quantity"])

@@ -2,8 +2,9 @@
 
 Only pixels that have a prior (finite in `prior_depth_m`, see `methods.prior`) are correlated, each at its own
 prior depth; depth = prior - c angle(c2 conj(c1)) / (4 pi (f2 - f1)). Pixels without a prior stay NaN. The filter
-quantity is the magnitude of the mean residual phasor over pairs and both frequencies, thresholded relative to
-the maximum over the correlated pixels.
+quantity is the magnitude of the mean residual phasor over pairs and both frequencies (with
+`filter_quantity='first'`, the reference's: the first frequency's), thresholded relative to the maximum over the
+correlated pixels.
 
 Region of interest (methods.roi): only pixels with a prior inside the ROI are correlated, and depths outside its
 depth interval are invalid; the prior's footprint is itself the ROI this method always had.
@@ -16,7 +17,7 @@ from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
 from methods.backend import Backend, backend_for
 from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
-from methods.fsk import correlate_pixels, depth_correction_m, mean_phasor_magnitude, roi_depth_m
+from methods.fsk import FILTER_QUANTITIES, correlate_pixels, depth_correction_m, filter_magnitude, roi_depth_m
 from methods.method import Frame, Method
 from methods.prior_image import HostPrior, Prior
 from methods.reconstruction import Reconstruction
@@ -26,15 +27,18 @@ from methods.timing import StageTimer
 
 def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid,
                        prior: Prior | np.ndarray, *, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
-                       backend: Backend | str = "cpu", timer: StageTimer | None = None, roi: Roi | None = None
-                       ) -> Reconstruction:
+                       backend: Backend | str = "cpu", timer: StageTimer | None = None, roi: Roi | None = None,
+                       filter_quantity: str = "mean") -> Reconstruction:
     """MM-2FSK depth map (ny, nx) from a two-frequency `signal` (n_rx, n_tx, 2) and a prior (ny, nx) on `grid`
     (a `Prior` or an image in metres, NaN = no prior), metres.
 
     Pass the `timer` that already timed the prior so that `total` includes it. `roi` (None = the whole grid)
     bounds the pixels correlated and the depths kept. A device-resident prior stays on its backend's device unless
-    the ROI cuts pixels (the host path restricts them).
+    the ROI cuts pixels (the host path restricts them) or the filter quantity is not the default 'mean'
+    (`fsk.filter_magnitude`; the device kernels compute that one).
     """
+    if filter_quantity not in FILTER_QUANTITIES:
+        raise ValueError(f"unknown filter_quantity {filter_quantity!r}; choose one of {', '.join(FILTER_QUANTITIES)}")
     if len(freqs_hz) != 2:
         raise ValueError(f"MM-2FSK needs exactly two frequencies, got {len(freqs_hz)}")
     if not isinstance(prior, Prior):
@@ -46,7 +50,7 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
         roi = None                                   # the whole grid: nothing to restrict
     timer = timer or StageTimer()
     sources = (() if roi is None else roi.sources) + ("prior",)
-    if prior.device_resident and (roi is None or roi.pixels.all()):
+    if prior.device_resident and (roi is None or roi.pixels.all()) and filter_quantity == "mean":
         depth_m, magnitude, prior_m = backend.depth_at_prior(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid,
                                                              prior, threshold_db, timer)
         if roi is not None:                          # a depth interval only: drop depths outside it
@@ -66,7 +70,7 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
         depth_m[has_prior] = prior_m - depth_correction_m(phasors[0], phasors[1], *freqs_hz)
     with timer.stage("filter"):
         magnitude = np.full(grid.image_shape, np.nan)
-        magnitude[has_prior] = mean_phasor_magnitude(phasors)
+        magnitude[has_prior] = filter_magnitude(phasors, filter_quantity)
         depth_m = filter_depth(depth_m, magnitude, threshold_db)
         if roi is not None:
             depth_m = roi_depth_m(depth_m, roi)
@@ -84,7 +88,9 @@ class MM2FSK(Method):
     n_freqs = 2
     priors = ("realsense", "photogrammetry")
     device_prior = True
+    params = {"filter_quantity": "mean"}     # 'first': the reference code's filter (profile=faithful)
 
     def run(self, frame: Frame, prior: Prior, backend: Backend, timer: StageTimer) -> Reconstruction:
         return reconstruct_mm2fsk(frame.signal, frame.freqs_hz, frame.antennas, frame.grid, prior,
-                                  threshold_db=frame.threshold_db, backend=backend, timer=timer, roi=frame.roi)
+                                  threshold_db=frame.threshold_db, backend=backend, timer=timer, roi=frame.roi,
+                                  filter_quantity=self.values["filter_quantity"])
