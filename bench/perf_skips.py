@@ -18,7 +18,6 @@ planes of the grid and scaled to all (marked in `full_timing`).
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import dataclasses
 import statistics
@@ -29,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from methods.domain.capture import RadarGrid
-from methods.skips import ALL, NONE, SKIP_NAMES, SkipSettings, default_for
+from methods.skips import ALL, NONE, SkipSettings, default_for
 
 DEPTH_TOL_M = 1e-4              # 0.1 mm
 AGREE_SHARE = 0.99              # of the pixels valid in both

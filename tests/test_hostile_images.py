@@ -4,7 +4,6 @@ from the header before any pixel is decoded. Property: any byte mutation of a re
 or one error, within bounded memory and time."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -195,7 +195,7 @@ def test_read_json_returns_data_or_one_error(tmp_path, data, depth):
     path.write_bytes(b"[" * depth + data + b"]" * depth)
     try:
         with bounded():
-            value = read_json(path, kind=object)
+            read_json(path, kind=object)
     except DatasetError as err:
         assert err.path == path and "\n" not in err.problem
         return

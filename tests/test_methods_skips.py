@@ -16,7 +16,7 @@ from methods.bp import peak_depth_m
 from methods.bp_search import SearchPlan, search_depth
 from methods.correlate import correlate_reference, correlate_volume
 from methods.filtering import filter_depth
-from methods.fsk import correlate_pixels, depth_correction_m, mean_phasor_magnitude, two_pass_depth_m
+from methods.fsk import correlate_pixels, mean_phasor_magnitude, two_pass_depth_m
 from methods.fsk3 import slope_correction_m
 from methods.range_cpu import correlate_range, path_bounds_m, range_table
 from methods.roi import dilate, full_roi, roi_from_mask_bb

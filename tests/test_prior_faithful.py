@@ -3,7 +3,6 @@ checked against geometry and against the definitions (MAROON_FORMAT.md 2.4, 4.2,
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from scipy.interpolate import LinearNDInterpolator
 
 from methods.prior import delaunay_fill, realsense_prior_m
