@@ -129,6 +129,11 @@ README_RUNS: dict[str, list[str]] = {
     ".venv/bin/python -m bench.perf_sweep --root data/synthetic [--device cpu|cuda] [--bp-grid capture|small]":
         ["{py} -m bench.perf_sweep --help"],
     ".venv/bin/python -m bench.perf --device cuda --out results": ["{py} -m bench.perf --help"],
+    # new frames of every capture, minutes on the CPU; test_perf_skips_gpu runs its parts
+    ".venv/bin/python -m bench.perf_skips_gpu --root data/synthetic --device cuda":
+        ["{py} -m bench.perf_skips_gpu --help"],
+    ".venv/bin/python -m bench.perf_skips_gpu --root data/synthetic --device cpu --cases bp_d05,bp_full "
+    "--variants auto": ["{py} -m bench.perf_skips_gpu --help"],
     r"python -m bench.perf\|perf_frames\|perf_stream\|perf_sweep\|perf_overhead ... [--out DIR]":
         ["{py} -m bench.perf --help", "{py} -m bench.perf_frames --help", "{py} -m bench.perf_stream --help",
          "{py} -m bench.perf_sweep --help", "{py} -m bench.perf_overhead --help"],
