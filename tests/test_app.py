@@ -192,7 +192,8 @@ def test_concurrent_runs_on_a_missing_synthetic_root_share_one_generation(tmp_pa
                                   text=True).stdout)
     (root / "01_plate" / f".30.tmp-{dead_pid}-0123abcd").mkdir(parents=True)
     runs = [subprocess.Popen([sys.executable, "-m", "bench", "dataset=synthetic", f"dataset.root={root}",
-                              "dataset.generate.objects=[01_plate]", "method=2fsk", "freq=d05", "prior=none",
+                              "dataset.generate.objects=[01_plate]", "synth=ideal", "method=2fsk", "freq=d05",
+                              "prior=none",
                               "store.dir=null", f"hydra.run.dir={tmp_path / f'run{i}'}"],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
     outputs = [run.communicate(timeout=600) for run in runs]
