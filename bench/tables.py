@@ -158,7 +158,9 @@ def _methods_sentence(rows: pd.DataFrame) -> str:
 def caption(name: str, rows: pd.DataFrame) -> str:
     """What the table holds, from its rows: methods and priors, captures, grids, counting and metric rules."""
     objects, distances = sorted(rows.object.unique()), sorted(rows.distance.unique())
-    n_captures = len(rows[CAPTURE_COLUMNS].drop_duplicates())
+    n_captures = len(rows[PER_CAPTURE].drop_duplicates())
+    n_frames = len(rows[CAPTURE_COLUMNS].drop_duplicates())
+    frames = f", {n_frames} frames, each capture's frames averaged first" if n_frames > n_captures else ""
     faithful = "metrics" in rows and rows["metrics"].eq("faithful").any()
     metric_rule = ("MAROON's reference metric definitions (metrics.faithful=true): P counts every radar point, "
                    "off-object ones with their full depth as error" if faithful else
@@ -168,7 +170,7 @@ def caption(name: str, rows: pd.DataFrame) -> str:
                    "distance to the object")
     devices = ", ".join(sorted(rows.device.astype(str).unique()))
     return (f"{TITLES.get(name, name)}: {_methods_sentence(rows)}. {n_captures} captures "
-            f"({', '.join(objects)}) at {', '.join(map(str, distances))} cm, every depth map scored on its "
+            f"({', '.join(objects)}) at {', '.join(map(str, distances))} cm{frames}, every depth map scored on its "
             f"capture's calibration pixel grid (methods computed on another grid are resampled: bilinear on one "
             f"surface, else nearest pixel). Means over each row's successful captures (ok); a row marked "
             f"{NOT_COMPARABLE} failed on some capture, covers fewer captures and is not ranked; all other rows cover "

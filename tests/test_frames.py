@@ -15,7 +15,7 @@ from bench import maroon
 from methods.domain.errors import DatasetError
 from bench.frames import pair_nearest, parse_frame_spec, realsense_times_s, select_frames
 from bench.store import capture_files
-from bench.tables import summarise
+from bench.tables import caption, summarise
 
 SEQUENCE = {"frames": 3, "motion": "approach", "motion_speed_m_s": 0.1, "frequency_points": 16}
 
@@ -129,7 +129,10 @@ def _frame_rows(frames_per_capture: dict[str, list[float]], failed: tuple = ()) 
 
 
 def test_tables_average_each_captures_frames_first():
-    summary = summarise(_frame_rows({"01_plate": [1.0, 1.0, 1.0, 1.0], "03_sphere": [3.0]}))
+    rows = _frame_rows({"01_plate": [1.0, 1.0, 1.0, 1.0], "03_sphere": [3.0]})
+    assert "2 captures (01_plate, 03_sphere) at 30 cm, 5 frames, each capture's frames averaged first" in \
+        caption("table3", rows.assign(device="cpu"))
+    summary = summarise(rows)
     line = summary.iloc[0]
     assert line.captures == 2 and line.ok == 2 and line.comparable
     assert line.P_cm == pytest.approx(2.0)                  # (1 + 3) / 2, not (4 x 1 + 3) / 5
