@@ -5,8 +5,8 @@
 #   3. a sweep of two new cells where one job is cancelled (scancel) while it waits: the sweep names the cell and
 #      its cause, merges the finished one and exits 1;
 #   4. the same command again: the finished cell from the store, the cancelled one computed; exit 0.
-# Usage: sudo bash scripts/slurm_try.sh [OUT]   (default OUT: outputs/slurm-try; must be on a shared/local disk,
-# not /tmp: BENCH_SLURM_LOCAL_PATHS=1 is set, since this cluster has one node). Took 5.8 min at load 13 on 2 cores
+# Usage: sudo bash scripts/slurm_try.sh [OUT]   (default OUT: outputs/slurm-try; any disk will do, as
+# BENCH_SLURM_LOCAL_PATHS=1 is set: this cluster has one node). Took 5.8 min at load 13 on 2 cores
 # (generating the two captures included; they are cached afterwards).
 set -euo pipefail
 cd "$(dirname "$0")/.."
