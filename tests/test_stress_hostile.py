@@ -25,6 +25,6 @@ def test_hostile_case_ends_cleanly(case, source_capture, tmp_path):
     elif case in NOTHING_COMPARABLE:
         assert row["outcome"] == "nothing-comparable" and row["valid_px"] == 1, row
     elif case in VALUE_ERRORS:
-        assert row["outcome"] == "error" and row["message"].startswith("ValueError: "), row
+        assert row["outcome"] == "error" and row["message"].startswith(("ValueError: ", "UsageError: ")), row
     else:                                                        # a DatasetError naming the file in the capture
         assert row["outcome"] == "error" and row["message"].startswith(f"DatasetError: {tmp_path / case}"), row
