@@ -4,15 +4,20 @@ correction of 3FSK, so that a prior error beyond the fine pair's unambiguous ran
 For frequencies f_lo < f_mid < f_hi (d05_d10: 72.00, 81.45, 82.00 GHz), per pixel with a prior d0:
 
 1. Coarse: the neighbouring pair with the smallest difference (f_mid, f_hi: 0.55 GHz for d05_d10) is correlated
-   at (x, y, d0); d1 = d0 - c angle(c_hi conj(c_mid)) / (4 pi df_min) is unambiguous while |d - d0| <
-   c / (4 df_min) (13.6 cm for d05_d10, 7.5 cm for d1_d10, 3.7 cm for d2_d10), but noisy.
-2. Fine: the three frequencies are correlated again at (x, y, d1) and the least-squares phase slope over frequency
-   (`fsk3.slope_correction_m`, dominated by the 10 GHz span) gives d = d1 - c s / (4 pi). It unwraps correctly
-   while |d - d1| < c / (4 (f_hi - f_lo)) = 0.75 cm, which the coarse step must reach.
+   at (x, y, d0); its correction dz = c angle(c_hi conj(c_mid)) / (4 pi df_min) is unambiguous while
+   |d - d0| < c / (4 df_min) (13.6 cm for d05_d10, 7.5 cm for d1_d10, 3.7 cm for d2_d10), but noisy: on the
+   synthetic catalogue MM-2FSK d05 alone is off by ~3 cm per pixel. A depth camera's calibration error moves the
+   whole prior, so the prior is shifted by one offset, the median of the corrections over the pixels the filter
+   keeps (the strongest ones), as 2FSK's first pass shifts its scalar guess by its strongest pixel's correction;
+   per-pixel coarse noise thus never reaches the fine step.
+2. Fine: the three frequencies are correlated again at (x, y, d0 - offset) and the least-squares phase slope over
+   frequency (`fsk3.slope_correction_m`, dominated by the 10 GHz span) gives the depth per pixel. It unwraps
+   correctly while |d - (d0 - offset)| < c / (4 (f_hi - f_lo)) = 0.75 cm.
 
 MM-2FSK d10 wraps as soon as the prior is off by more than 0.75 cm (a depth-camera calibration error of that
 size is common); MM-3FSK keeps d10's precision up to the coarse pair's range. Cost: two correlation passes
-(2 + 3 frequencies per pixel) against one (2) for MM-2FSK. The filter quantity is the magnitude of the mean
+(2 + 3 frequencies per pixel) against one (2) for MM-2FSK. What it does not correct: prior errors that
+vary across the object by more than 0.75 cm (the offset is one number). The filter quantity is the magnitude of the mean
 residual phasor over the pairs and the three frequencies of the fine pass, thresholded relative to the maximum.
 Only pixels with a prior (inside the ROI) are correlated; depths outside the ROI's depth interval are invalid.
 """
@@ -21,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from methods.backend import Backend
-from methods.filtering import filter_depth
+from methods.filtering import filter_depth, keep_mask
 from methods.fsk import correlate_pixels, depth_correction_m, mean_phasor_magnitude, roi_depth_m
 from methods.fsk3 import slope_correction_m
 from methods.method import Frame, Method
@@ -36,20 +41,24 @@ def coarse_pair(freqs_hz: np.ndarray) -> list[int]:
 
 
 def mm3fsk_depth_m(signal: np.ndarray, freqs_hz: np.ndarray, antennas, x_m: np.ndarray, y_m: np.ndarray,
-                   prior_m: np.ndarray, backend: Backend, timer: StageTimer
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Depth (N,) m, its fine phasors (3, N) and the coarse depth (N,) m at pixels (x_m, y_m) (N,) with priors
-    prior_m (N,), from a three-frequency `signal` (n_rx, n_tx, 3) at ascending `freqs_hz`."""
+                   prior_m: np.ndarray, backend: Backend, timer: StageTimer, threshold_db: float | None
+                   ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Depth (N,) m, its fine phasors (3, N) and the prior offset (m) at pixels (x_m, y_m) (N,) with priors
+    prior_m (N,), from a three-frequency `signal` (n_rx, n_tx, 3) at ascending `freqs_hz`; the offset is the median
+    coarse correction over the pixels `threshold_db` keeps (module doc)."""
     coarse = coarse_pair(freqs_hz)
     with timer.stage("correlate"):
         first = correlate_pixels(signal[:, :, coarse], freqs_hz[coarse], antennas, x_m, y_m, prior_m, backend)
     with timer.stage("depth"):
-        coarse_m = prior_m - depth_correction_m(first[0], first[1], *freqs_hz[coarse])
+        correction_m = depth_correction_m(first[0], first[1], *freqs_hz[coarse])
+        kept = keep_mask(mean_phasor_magnitude(first), threshold_db)
+        offset_m = float(np.median(correction_m[kept])) if kept.any() else 0.0      # no signal: no shift
+        start_m = prior_m - offset_m
     with timer.stage("correlate"):
-        fine = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, coarse_m, backend)
+        fine = correlate_pixels(signal, freqs_hz, antennas, x_m, y_m, start_m, backend)
     with timer.stage("depth"):
-        depth_m = coarse_m - slope_correction_m(fine, freqs_hz)
-    return depth_m, fine, coarse_m
+        depth_m = start_m - slope_correction_m(fine, freqs_hz)
+    return depth_m, fine, offset_m
 
 
 class MM3FSK(Method):
@@ -69,11 +78,12 @@ class MM3FSK(Method):
         has_prior = np.isfinite(prior_image_m) & roi.pixels
         x_img, y_img = grid.pixel_xy_m()
         depth_m, magnitude = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
-        coarse_m = np.full(grid.image_shape, np.nan)
+        offset_m = float("nan")
         if has_prior.any():
-            depth_px, fine, coarse_px = mm3fsk_depth_m(frame.signal, freqs_hz, frame.antennas, x_img[has_prior],
-                                                       y_img[has_prior], prior_image_m[has_prior], backend, timer)
-            depth_m[has_prior], coarse_m[has_prior] = depth_px, coarse_px
+            depth_m[has_prior], fine, offset_m = mm3fsk_depth_m(frame.signal, freqs_hz, frame.antennas,
+                                                                x_img[has_prior], y_img[has_prior],
+                                                                prior_image_m[has_prior], backend, timer,
+                                                                frame.threshold_db)
             with timer.stage("filter"):
                 magnitude[has_prior] = mean_phasor_magnitude(fine)
         with timer.stage("filter"):
@@ -82,4 +92,4 @@ class MM3FSK(Method):
         return Reconstruction(depth_m=depth_m, magnitude=magnitude, freqs_hz=freqs_hz, timings_ms=timer.finish(),
                               grid=grid, method=self.name,
                               extra={"prior_depth_m": prior_image_m, "prior_pixels": n, "roi_px": n,
-                                     "coarse_depth_m": coarse_m, "roi_sources": roi.sources + ("prior",)})
+                                     "prior_offset_m": offset_m, "roi_sources": roi.sources + ("prior",)})
