@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-GENERATOR_VERSION = "5"          # bump when the generator's output changes for an unchanged config
+GENERATOR_VERSION = "6"          # bump when the generator's output changes for an unchanged config
 C_M_PER_S = 299_792_458.0
 F_LOW_GHZ, F_HIGH_GHZ = 72.0, 82.0
 QUARTER_WAVELENGTH_M = C_M_PER_S / (F_HIGH_GHZ * 1e9) / 4.0   # 0.914 mm at 82 GHz
