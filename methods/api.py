@@ -153,7 +153,7 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     invalid_reason = None
     method.check(len(indices), freq, prior_value)
     backend = backend_for(device)
-    skips = resolve(roi, method.name, len(indices), backend.name)
+    skips = resolve(roi, method.name, len(indices), backend.dense_beats_search)
     grid = grid or frame.grid
     signal = np.ascontiguousarray(frame.signal[:, :, indices])
     _check_signal(capture, signal)

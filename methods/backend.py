@@ -103,6 +103,8 @@ class Backend:
     host_range_search = False
     #: BP over a region of interest computes the rectangular volume of its bounding box (else the point search)
     prefers_box_volume = False
+    #: dense kernels beat the host-driven searches for few frequencies (the `roi=auto` defaults, methods.skips)
+    dense_beats_search = False
 
     def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m) -> np.ndarray:
         """complex64 (F, N) phasors at points_m (N, 3), radar space, metres."""

@@ -75,31 +75,32 @@ ALL = SkipSettings(**dict.fromkeys(SKIP_NAMES, True))
 PRESETS = ("none", "auto", "all")
 
 
-def default_for(method: str, n_freqs: int, device: str = "cpu") -> SkipSettings:
-    """The skips on by default (`roi=auto`) for a method, frequency count and device: those measured to agree with
+def default_for(method: str, n_freqs: int, dense_beats_search: bool = False) -> SkipSettings:
+    """The skips on by default (`roi=auto`) for a method, frequency count and backend: those measured to agree with
     the full computation on every catalogue object and to save time there (notes/skips.md, notes/gpu.md).
     `mask_bb_depth` stays off: cutting BP's depth search at the box moved 1.8 % of two-frequency BP's depths on the
     plate and, where an object lies in front of the box (the two objects at 30 cm: one at 25 cm, zmin 26 cm), it
     removes the image maximum, so the -14 dB filter keeps other pixels (BP_max metrics moved 48 %); for 2FSK, 3FSK
     and MM-2FSK dropping depths outside the box changes which in-box pixels the metrics' triangulation keeps (up to
-    5 %), for no time saved. On Warp devices ("cuda", "warp-cpu") the dense kernels are cheaper than the host-driven
-    searches for few frequencies (H100, new frames, catalogue at 30 cm: two-frequency BP 792 ms with the coarse
-    ROI and coarse-to-fine search against 41 ms for the whole volume; 2FSK d05 18.5 ms with `fsk_keep` against
-    9.9 ms; 3FSK 21.8 against 16.5 ms; two-frequency BP with the coarse ROI evaluated as the dense volume over its
-    bounding box, bp._box_depth_m, 54.8 against 40.5 ms), so there only `mask_bb` stays on for them; BP with many
-    frequencies keeps the coarse ROI and the search (145 against 519 ms, notes/gpu.md)."""
+    5 %), for no time saved. On a backend whose `dense_beats_search` is set (Warp: "cuda", "warp-cpu") the dense
+    kernels are cheaper than the host-driven searches for few frequencies (H100, new frames, catalogue at 30 cm:
+    two-frequency BP 792 ms with the coarse ROI and coarse-to-fine search against 41 ms for the whole volume; 2FSK
+    d05 18.5 ms with `fsk_keep` against 9.9 ms; 3FSK 21.8 against 16.5 ms; two-frequency BP with the coarse ROI
+    evaluated as the dense volume over its bounding box, bp._box_depth_m, 54.8 against 40.5 ms), so there only
+    `mask_bb` stays on for them; BP with many frequencies keeps the coarse ROI and the search (145 against 519 ms,
+    notes/gpu.md)."""
     if method == "bp":
-        if device != "cpu" and n_freqs <= 3:
+        if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True)
         return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True)
-    if device != "cpu":
+    if dense_beats_search:
         return SkipSettings(mask_bb=True)
     return SkipSettings(mask_bb=True, fsk_keep=True)
 
 
 def resolve(roi: str | Mapping | SkipSettings | None, method: str = "bp", n_freqs: int = 2,
-            device: str = "cpu") -> SkipSettings:
-    """SkipSettings from a preset name ('none', 'auto' = `default_for(method, n_freqs, device)`, 'all'), a mapping of
+            dense_beats_search: bool = False) -> SkipSettings:
+    """SkipSettings from a preset name ('none', 'auto' = `default_for(method, n_freqs, dense_beats_search)`, 'all'), a mapping of
     fields (a Hydra `roi` config; its `name` key is ignored, an optional `preset` key gives the base, default
     'none'), an instance, or None (= 'auto')."""
     if roi is None:
@@ -109,10 +110,10 @@ def resolve(roi: str | Mapping | SkipSettings | None, method: str = "bp", n_freq
     if isinstance(roi, str):
         if roi not in PRESETS:
             raise ValueError(f"roi must be one of {', '.join(PRESETS)} or a mapping of skip settings, got {roi!r}")
-        return {"none": NONE, "all": ALL}.get(roi) or default_for(method, n_freqs, device)
+        return {"none": NONE, "all": ALL}.get(roi) or default_for(method, n_freqs, dense_beats_search)
     fields = {k: v for k, v in dict(roi).items() if k not in ("name", "preset")}
     known = {f.name for f in dataclasses.fields(SkipSettings)}
     unknown = set(fields) - known
     if unknown:
         raise ValueError(f"unknown roi setting(s) {', '.join(sorted(unknown))}; allowed: {', '.join(sorted(known))}")
-    return dataclasses.replace(resolve(dict(roi).get("preset", "none"), method, n_freqs, device), **fields)
+    return dataclasses.replace(resolve(dict(roi).get("preset", "none"), method, n_freqs, dense_beats_search), **fields)

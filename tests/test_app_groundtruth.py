@@ -19,7 +19,7 @@ def test_ground_truth_is_built_once_per_capture_for_every_cell(synth_root, tmp_p
     calls = []
     real = app.ground_truth
     monkeypatch.setattr(app, "ground_truth", lambda capture, grid: calls.append(capture.name) or real(capture, grid))
-    app._ground_truth.cache_clear()
+    monkeypatch.setattr(app, "_GROUND_TRUTHS", type(app._GROUND_TRUTHS)())  # none cached yet
     rows = [app.run(_cfg(synth_root, *cell), tmp_path / str(i))[0]
             for i, cell in enumerate([["cell=mm2fsk_d10"], ["cell=2fsk_d05"], ["cell=bp_d05", "grid=bp_cpu"]])]
     assert len(calls) == 1

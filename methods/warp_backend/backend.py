@@ -21,6 +21,7 @@ class WarpBackend(Backend):
     tests' reference for the kernels without a GPU)."""
 
     prefers_box_volume = True
+    dense_beats_search = True
 
     def __init__(self, name: str):
         init()
