@@ -58,7 +58,7 @@ def synthetic_asked(task_overrides: list[str]) -> bool:
     return "dataset=synthetic" in names or not any(name.startswith("dataset.root=") for name in names)
 
 
-def _ensure_synthetic(dataset: DictConfig, root: Path, synth: DictConfig) -> None:
+def ensure_synthetic(dataset: DictConfig, root: Path, synth: DictConfig) -> None:
     """Generate (or reuse from cache) the synthetic captures the dataset config asks for (bench.synth).
 
     Only into a missing or empty folder or one the generator made (it holds its manifest), under the root's lock
@@ -278,7 +278,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
 
     root = Path(to_absolute_path(str(cfg.dataset.root)))
     if generate:
-        _ensure_synthetic(cfg.dataset, root, cfg.synth)
+        ensure_synthetic(cfg.dataset, root, cfg.synth)
     if not root.exists():
         raise DatasetError(root, "dataset root does not exist")
     store = None if cfg.store.dir is None else Store(to_absolute_path(str(cfg.store.dir)))

@@ -156,13 +156,13 @@ class CheckedSlurmLauncher(SlurmLauncher):
 
     def _prepare_data(self) -> None:
         """Generate the synthetic captures once, here, before any job starts (bench.app's rule for when)."""
-        from bench.app import _ensure_synthetic, synthetic_asked
+        from bench.app import ensure_synthetic, synthetic_asked
 
         overrides = list(self.config.hydra.overrides.task)
         if synthetic_asked(overrides):
             print(f"preparing the synthetic captures in {self._paths()['dataset.root']} before submitting",
                   flush=True)
-            _ensure_synthetic(self.config.dataset, self._paths()["dataset.root"], self.config.synth)
+            ensure_synthetic(self.config.dataset, self._paths()["dataset.root"], self.config.synth)
 
     def launch(self, job_overrides, initial_job_idx: int) -> list[JobReturn]:
         import submitit

@@ -247,14 +247,14 @@ def test_app_names_a_bad_preset_or_setting_in_one_line(tmp_path):
     from omegaconf import OmegaConf
 
     from bench import cli
-    from bench.app import _ensure_synthetic
+    from bench.app import ensure_synthetic
 
     dataset = OmegaConf.create({"generate": {"distances": [30], "objects": ["01_plate"]}})
     for synth, problem in (({"preset": "nope", "overrides": {}}, "unknown synthetic preset 'nope'"),
                            ({"preset": "realistic", "overrides": {"bogus": 1}}, "bogus"),
                            ({"preset": "ideal", "overrides": {"scattering": "mirror"}}, "scattering must be")):
         with pytest.raises(cli.UserError, match=problem) as err:
-            _ensure_synthetic(dataset, tmp_path / "root", OmegaConf.create(synth))
+            ensure_synthetic(dataset, tmp_path / "root", OmegaConf.create(synth))
         assert err.value.what == "synth"
     assert not (tmp_path / "root").exists()                     # nothing generated, nothing claimed
 
