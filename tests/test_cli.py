@@ -180,7 +180,7 @@ MISTAKES = [
     ("tables-csv-dir", "{py} -m bench.tables table1 --csv {empty}", EXIT_USER,
      "error: {empty}: output file is a directory"),
     ("tables-name", "{py} -m bench.tables tabel3", EXIT_USER,
-     "error: argument table: invalid choice: 'tabel3' (choose from 'table1', 'table2', 'table3', 'runtime') "
+     "error: argument table: invalid choice: 'tabel3' (choose from 'table1', 'table2', 'table3', 'beyond', 'runtime') "
      "(see python -m bench.tables --help)"),
     ("sweep-missing", "{py} -m bench.sweep {missing}", EXIT_USER, "error: {missing}: sweep root does not exist"),
     ("sweep-empty", "{py} -m bench.sweep {empty}", EXIT_USER, "error: {empty}: no job wrote */results.csv"),
