@@ -12,7 +12,8 @@ how far the synthetic benchmark is from the paper's real-data Tables II and III.
    EFFECTS), on `--ablation-objects` with 21 frequencies (72-82 GHz in 0.5 GHz steps, which holds every
    two-frequency configuration of Table III exactly) and the cells `--ablation-cells` (no BP_max: it needs 128).
 
-BP runs on the reduced CPU grid `bp_cpu` like the demo (cells' own grid). Costs are in the README.
+Every cell runs on its own grid as the demo does (BP: the paper's 301 x 301 x 201, configs/cell/). Costs are in
+the README.
 """
 from __future__ import annotations
 
@@ -228,7 +229,7 @@ def main() -> int:
     parts = [f"# Paper agreement: synthetic preset `{args.preset}` against MM-2FSK Tables II and III\n"]
     if not args.no_tables:
         parts.append(f"Captures: {', '.join(args.objects)} at 30 cm (paper: 45 MAROON objects at 30 cm). Metrics in "
-                     "cm; ratio = synthetic / paper. BP on the reduced CPU grid bp_cpu.")
+                     "cm; ratio = synthetic / paper. Each cell on its configured grid (BP: the paper's).")
         root = out / "data" / args.preset
         print(f"data {root}: {generate(root, config, args.objects):.0f} s", flush=True)
         rows = run_cells(root, cells, args.objects, store, out)
