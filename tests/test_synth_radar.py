@@ -218,7 +218,10 @@ def test_expected_files_exist(tmp_path):
     names = {str(p.relative_to(capture)) for p in capture.rglob("*") if p.is_file()}
     expected = {"metadata.json", "alignment.json", "radar_72.0_82.0_16/calibration.json",
                 "realsense/calibration.json", "realsense/timestamps.txt",
-                "photogrammetry/mesh_masked_smoothed.obj"}
+                "photogrammetry/mesh_masked_smoothed.obj",
+                # what MAROON's reference loader looks for beside our ground truth (bench/synth/photogrammetry.py)
+                "photogrammetry/mesh_masked.obj", "photogrammetry/cams.xml",
+                "photogrammetry/depth/synthetic_cam0.tif", "photogrammetry/rgb/synthetic_cam0.jpg"}
     for i in ("000000", "000001"):
         expected |= {f"radar_72.0_82.0_16/calibrated_data/{i}.npy",
                      f"radar_72.0_82.0_16/calibrated_data/{i}_emptyfiltered.npy",
