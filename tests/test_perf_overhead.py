@@ -4,7 +4,12 @@ from __future__ import annotations
 from bench.perf_overhead import STAGES, measure
 
 
-def test_later_cells_reuse_the_read_captures_and_ground_truth(synth_root, tmp_path):
+def test_later_cells_reuse_the_read_captures_and_ground_truth(synth_root, tmp_path, monkeypatch):
+    from bench import app
+
+    # empty process caches: other tests of this process may have read the capture already
+    monkeypatch.setattr(app, "_CAPTURES", type(app._CAPTURES)())
+    monkeypatch.setattr(app, "_GROUND_TRUTHS", type(app._GROUND_TRUTHS)())
     rows = measure(synth_root, ["mm2fsk_d10", "mm2fsk_d05"], ["01_plate/30"], "cpu", None, use_store=True,
                    work=tmp_path)
     first, second, total = rows

@@ -36,7 +36,11 @@ def test_node_local_paths_are_refused(monkeypatch, tmp_path):
         slurm.check_shared(Path("/tmp/store"), "store.dir")
     with pytest.raises(cli.UserError, match="node-local"):
         slurm.check_shared(Path("/dev/shm/out"), "hydra.sweep.dir")
-    slurm.check_shared(REPO / "outputs" / "store", "store.dir")       # the checkout's disk is not refused
+    monkeypatch.setattr(slurm, "_mount_type", lambda path: "nfs4")   # a shared file system (not /tmp: the CI's
+    slurm.check_shared(Path("/shared/project/store"), "store.dir")   # checkout itself may lie under /tmp)
+    monkeypatch.setattr(slurm, "_mount_type", lambda path: "tmpfs")
+    with pytest.raises(cli.UserError, match="node-local"):
+        slurm.check_shared(Path("/shared/project/store"), "store.dir")
     monkeypatch.setenv("BENCH_SLURM_LOCAL_PATHS", "1")                # a single-node cluster
     slurm.check_shared(Path("/tmp/store"), "store.dir")
 
