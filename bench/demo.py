@@ -175,12 +175,13 @@ def main() -> int:
         texts.append((out / experiment / f"{experiment}.md").read_text())
         print(f"{experiment}: {len(rows)} rows, {int((~rows.cached).sum())} computed, {int(rows.cached.sum())} "
               f"from the store, {time.perf_counter() - sweep_started:.0f} s", flush=True)
+    print("\n\n".join(["", *texts]))
+    page = report_page(out)                     # before publishing: it draws the pictures that results/ keeps
     if args.update_results:
         write_table1(args.results)
         for experiment in EXPERIMENTS:
             publish(out / experiment, pd.read_csv(out / experiment / "results.csv"), experiment, args.results)
-    print("\n\n".join(["", *texts]))
-    print(f"\nreport (tables, spread, per object, pictures; open in a browser): {report_page(out)}")
+    print(f"\nreport (tables, spread, per object, pictures; open in a browser): {page}")
     copied = f"; tables, plots and baselines copied to {args.results}" if args.update_results else ""
     print(f"outputs under {out}{copied}; {time.perf_counter() - started:.0f} s in all")
     return 0
