@@ -18,6 +18,7 @@ capture's metric grid):
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import subprocess
@@ -155,12 +156,32 @@ def _perspective_camera(gt_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, centre + np.array([-0.9, 0.6, -1.6]) * max(size, 0.05)
 
 
+@contextlib.contextmanager
+def _native_output_discarded():
+    """Discard what native code writes to the process's stdout and stderr (file descriptors 1 and 2) meanwhile."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved, null = (os.dup(1), os.dup(2)), os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, null):
+            os.close(fd)
+
+
 @functools.lru_cache(maxsize=1)
 def _offscreen(size_px: int):
-    """One Open3D offscreen renderer per process (creating one costs about a second and prints driver lines)."""
+    """One Open3D offscreen renderer per process (creating one costs about a second). Its creation prints windowing
+    and driver lines from C++ (GLFW fallback, Vulkan device) into the user's console: discarded; a failure still
+    raises."""
     from open3d.visualization import rendering
 
-    return rendering.OffscreenRenderer(size_px, size_px)
+    with _native_output_discarded():
+        return rendering.OffscreenRenderer(size_px, size_px)
 
 
 def render_open3d(points: np.ndarray, colours: np.ndarray, gt_points: np.ndarray, size_px: int = 360) -> np.ndarray:
