@@ -74,6 +74,20 @@ def worth_it(freqs_hz: np.ndarray) -> bool:
     return len(freqs_hz) >= RANGE_MIN_FREQS and plan(freqs_hz) is not None
 
 
+def path_bounds_m(tx_m: np.ndarray, rx_m: np.ndarray, lo_m, hi_m) -> tuple[float, float]:
+    """Lower and upper bounds of |p - rx| + |p - tx| over the box [lo_m, hi_m] (3,) and all pairs, metres: the
+    stretch of path the range profiles must cover."""
+    lo_m, hi_m = np.asarray(lo_m, dtype=np.float64), np.asarray(hi_m, dtype=np.float64)
+
+    def near_far(ant_m):
+        near = np.linalg.norm(np.clip(ant_m, lo_m, hi_m) - ant_m, axis=1)
+        far = np.linalg.norm(np.maximum(np.abs(ant_m - lo_m), np.abs(ant_m - hi_m)), axis=1)
+        return near.min(), far.max()
+    near_rx, far_rx = near_far(rx_m)
+    near_tx, far_tx = near_far(tx_m)
+    return float(near_rx + near_tx), float(far_rx + far_tx)
+
+
 def sample_window(rplan: RangePlan, path_min_m: float, path_max_m: float, margin: int = 2) -> tuple[int, int]:
     """(m0, n): the profile samples m0 .. m0 + n - 1 (taken mod L) cover the paths [path_min_m, path_max_m] with
     `margin` samples either side, for linear interpolation between neighbours."""

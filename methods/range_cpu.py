@@ -63,15 +63,7 @@ def worth_it(freqs_hz: np.ndarray) -> bool:
 
 def path_bounds_m(tx_m: np.ndarray, rx_m: np.ndarray, points_m: np.ndarray) -> tuple[float, float]:
     """Lower and upper bounds of |p - rx| + |p - tx| over the bounding box of `points_m` and all pairs, metres."""
-    lo, hi = points_m.min(axis=0), points_m.max(axis=0)
-
-    def near_far(ant_m):
-        near = np.linalg.norm(np.clip(ant_m, lo, hi) - ant_m, axis=1)
-        far = np.linalg.norm(np.maximum(np.abs(ant_m - lo), np.abs(ant_m - hi)), axis=1)
-        return near.min(), far.max()
-    near_rx, far_rx = near_far(rx_m)
-    near_tx, far_tx = near_far(tx_m)
-    return float(near_rx + near_tx), float(far_rx + far_tx)
+    return range_compression.path_bounds_m(tx_m, rx_m, points_m.min(axis=0), points_m.max(axis=0))
 
 
 def range_table(signal: np.ndarray, freqs_hz: np.ndarray, path_min_m: float, path_max_m: float) -> RangeTable:

@@ -17,16 +17,9 @@ KERNELS = ("tc", "separable", "direct", "range")
 
 def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
     """Bounds of |p - rx| + |p - tx| over the box of the grid and all pairs, metres."""
-    lo = np.array([np.min(x_m), np.min(y_m), np.min(z_m)])
-    hi = np.array([np.max(x_m), np.max(y_m), np.max(z_m)])
-
-    def near_far(ant):
-        near = np.linalg.norm(np.clip(ant, lo, hi) - ant, axis=1)
-        far = np.linalg.norm(np.maximum(np.abs(ant - lo), np.abs(ant - hi)), axis=1)
-        return near.min(), far.max()
-    n_rx, f_rx = near_far(rx_m)
-    n_tx, f_tx = near_far(tx_m)
-    return n_rx + n_tx, f_rx + f_tx
+    lo_m = [np.min(x_m), np.min(y_m), np.min(z_m)]
+    hi_m = [np.max(x_m), np.max(y_m), np.max(z_m)]
+    return range_compression.path_bounds_m(tx_m, rx_m, lo_m, hi_m)
 
 
 def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box_m):
