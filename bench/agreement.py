@@ -199,6 +199,65 @@ def _markdown(frame: pd.DataFrame) -> str:
     return tables.to_markdown(frame) if len(frame) else "(no cells)"
 
 
+def cells_of_sweeps(table2: pd.DataFrame | None, table3: pd.DataFrame | None) -> pd.DataFrame:
+    """The rows of a demo's (or any) table2 and table3 sweeps at 30 cm with this module's `cell` names: Table II rows
+    become `mm2fsk_<freq>@photogrammetry`, Table III rows `<method>_<freq>` (e.g. `bp_full`, `3fsk_d05_d10`)."""
+    frames = []
+    for rows, suffix in ((table2, "@photogrammetry"), (table3, "")):
+        if rows is None or not len(rows):
+            continue
+        rows = rows[rows["distance"].astype(int) == 30].copy()
+        rows["cell"] = rows["method"].astype(str) + "_" + rows["freq"].astype(str) + suffix
+        frames.append(rows)
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["cell", *PAPER_METRICS])
+
+
+def report(rows: pd.DataFrame, preset_name: str, objects: list[str]) -> list[str]:
+    """Markdown sections comparing the rows (with a `cell` column) to the paper's Tables II and III."""
+    all_cells = [f"mm2fsk_{f}@photogrammetry" for f in PAPER_TABLE2] + list(PAPER_TABLE3)
+    labels = labels_of(all_cells)
+    summary = means(rows)
+    table2 = comparison(summary.rename(index=lambda c: c.split("_", 1)[1].split("@")[0] if "@" in c else c),
+                        PAPER_TABLE2, {f: labels[f] for f in PAPER_TABLE2})
+    table3 = comparison(summary, PAPER_TABLE3, labels)
+    order, pairs = orderings(summary, PAPER_TABLE3, labels)
+    cost = prior_cost(summary)
+    outside = outside_factor_two(pd.concat([table2, table3]))
+    return [f"# Paper agreement: synthetic preset `{preset_name}` against MM-2FSK Tables II and III\n",
+            f"Captures: {', '.join(objects)} at 30 cm (paper: 45 MAROON objects at 30 cm). Metrics in "
+            "cm; ratio = synthetic / paper. Each cell on its configured grid (BP: the paper's).",
+            "\n## Table II (MM-2FSK, photogrammetry prior)\n", _markdown(table2),
+            "\n## Table III\n", _markdown(table3),
+            f"\n## Cells outside a factor 2 ({len(outside)} of {4 * (len(table2) + len(table3))})\n",
+            "\n".join(f"* {line}" for line in outside) or "none",
+            "\n## Ordering of the Table III cells per metric\n", _markdown(order),
+            "\nPairs the paper states:\n", "\n".join(f"* {p}" for p in pairs) or "(none of its cells here)",
+            "\n## RealSense prior's cost (MM-2FSK, Table III / Table II)\n", _markdown(cost)]
+
+
+def write_from_sweeps(table2: pd.DataFrame | None, table3: pd.DataFrame | None, path: Path,
+                      preset_name: str) -> Path | None:
+    """`path` (agreement.md) from the rows of finished table2/table3 sweeps, no computation; None (nothing written)
+    when they hold no capture at 30 cm."""
+    rows = cells_of_sweeps(table2, table3)
+    if not len(rows):
+        return None
+    objects = sorted(rows["object"].unique())
+    text = "\n".join(report(rows, preset_name, objects)
+                     + ["\nFrom the rows of the sweeps (python -m bench.agreement --from-results DIR).\n"])
+    path.write_text(text)
+    return path
+
+
+def _read_rows(path: Path) -> pd.DataFrame | None:
+    if not path.is_file():
+        return None
+    try:
+        return pd.read_csv(path)
+    except (OSError, ValueError) as err:
+        raise cli.UserError(path, f"not a results table ({err})") from None
+
+
 def main() -> int:
     from bench.synth import CATALOGUE
     from bench.synth.config import PRESETS, preset
@@ -215,39 +274,35 @@ def main() -> int:
     parser.add_argument("--ablation-objects", nargs="+", default=list(ABLATION_OBJECTS), choices=list(CATALOGUE))
     parser.add_argument("--ablation-cells", nargs="+", default=list(ABLATION_CELLS))
     parser.add_argument("--no-tables", action="store_true", help="only the ablation")
+    parser.add_argument("--from-results", type=Path, metavar="DIR",
+                        help="no computation: the report from DIR/table2/results.csv and DIR/table3/results.csv "
+                             "(a demo's --out or results/), written to --out/agreement.md")
     args = parser.parse_args()
     all_cells = [f"mm2fsk_{f}@photogrammetry" for f in PAPER_TABLE2] + list(PAPER_TABLE3)
     cells = all_cells if args.cells is None else args.cells
     unknown = [c for c in cells + args.ablation_cells if c not in all_cells]
     if unknown:
         parser.error(f"unknown cell(s) {', '.join(unknown)}; known: {', '.join(all_cells)}")
+    if args.from_results is not None:
+        folder = cli.existing_path(args.from_results, "dir", "--from-results")
+        out = cli.output_dir(args.out).resolve()
+        written = write_from_sweeps(_read_rows(folder / "table2" / "results.csv"),
+                                    _read_rows(folder / "table3" / "results.csv"), out / "agreement.md", args.preset)
+        if written is None:
+            raise cli.UserError(folder, "no table2/table3 results.csv with captures at 30 cm")
+        print(written.read_text())
+        return 0
     out = cli.output_dir(args.out).resolve()
     store = None if str(args.store) == "none" else args.store.resolve()
     config = preset(args.preset)
-    labels = labels_of(all_cells)
     started = time.perf_counter()
     parts = [f"# Paper agreement: synthetic preset `{args.preset}` against MM-2FSK Tables II and III\n"]
     if not args.no_tables:
-        parts.append(f"Captures: {', '.join(args.objects)} at 30 cm (paper: 45 MAROON objects at 30 cm). Metrics in "
-                     "cm; ratio = synthetic / paper. Each cell on its configured grid (BP: the paper's).")
         root = out / "data" / args.preset
         print(f"data {root}: {generate(root, config, args.objects):.0f} s", flush=True)
         rows = run_cells(root, cells, args.objects, store, out)
         rows.to_csv(out / "rows.csv", index=False)
-        summary = means(rows)
-        table2 = comparison(summary.rename(index=lambda c: c.split("_", 1)[1].split("@")[0] if "@" in c else c),
-                            PAPER_TABLE2, {f: labels[f] for f in PAPER_TABLE2})
-        table3 = comparison(summary, PAPER_TABLE3, labels)
-        order, pairs = orderings(summary, PAPER_TABLE3, labels)
-        cost = prior_cost(summary)
-        outside = outside_factor_two(pd.concat([table2, table3]))
-        parts += ["\n## Table II (MM-2FSK, photogrammetry prior)\n", _markdown(table2),
-                  "\n## Table III\n", _markdown(table3),
-                  f"\n## Cells outside a factor 2 ({len(outside)} of {4 * (len(table2) + len(table3))})\n",
-                  "\n".join(f"* {line}" for line in outside) or "none",
-                  "\n## Ordering of the Table III cells per metric\n", _markdown(order),
-                  "\nPairs the paper states:\n", "\n".join(f"* {p}" for p in pairs),
-                  "\n## RealSense prior's cost (MM-2FSK, Table III / Table II)\n", _markdown(cost)]
+        parts = report(rows, args.preset, args.objects)
     if args.ablation:
         table = ablation(config, args.ablation_objects, args.ablation_cells, store, out)
         parts += [f"\n## Ablation: P (cm) with one effect off ({', '.join(args.ablation_objects)}; "

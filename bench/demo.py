@@ -11,7 +11,7 @@
    Everything goes under `--out` (default outputs/demo): the sweep roots `<out>/table2|table3/` and Table I
    `<out>/table1.*`. Tracked files are left alone unless `--update-results` is given: then Table I and
    each sweep's tables, plots and per-capture rows (the regression baselines) are copied into `--results`
-   (default results/).
+   (default results/), with `agreement.md`: the tables beside the paper's (bench.agreement, from the same rows).
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from pathlib import Path
 import pandas as pd
 from omegaconf import OmegaConf
 
-from bench import cli, tables
+from bench import agreement, cli, tables
 from bench.app import CONFIG_DIR
 
 EXPERIMENTS = ("table2", "table3")
@@ -181,6 +181,9 @@ def main() -> int:
         write_table1(args.results)
         for experiment in EXPERIMENTS:
             publish(out / experiment, pd.read_csv(out / experiment / "results.csv"), experiment, args.results)
+        # the paper-agreement report from these very rows (no second sweep; bench.agreement)
+        agreement.write_from_sweeps(*(pd.read_csv(out / e / "results.csv") for e in EXPERIMENTS),
+                                    args.results / "agreement.md", args.synth)
     print(f"\nreport (tables, spread, per object, pictures; open in a browser): {page}")
     copied = f"; tables, plots and baselines copied to {args.results}" if args.update_results else ""
     print(f"outputs under {out}{copied}; {time.perf_counter() - started:.0f} s in all")

@@ -108,6 +108,9 @@ README_RUNS: dict[str, list[str]] = {
     "python -m bench.agreement": ["{py} -m bench.agreement --help"],
     ".venv/bin/python -m bench.agreement": ["{py} -m bench.agreement --help"],
     ".venv/bin/python -m bench.agreement --ablation --no-tables": ["{py} -m bench.agreement --help"],
+    ".venv/bin/python -m bench.agreement --from-results results --out /tmp/agreement":   # rows -> report, ~2 s
+        ["{py} -m bench.agreement --from-results {repo}/results --out {tmp}/agreement",
+         "test -s {tmp}/agreement/agreement.md"],
     r"python -m bench.agreement [--preset realistic\|ideal] [--objects ...] [--cells ...] [--ablation] [--out DIR]":
         ["{py} -m bench.agreement --help"],
     ".venv/bin/python -m bench.inspect /data/maroon": ["{py} -m bench.inspect {synth}"],

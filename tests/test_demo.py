@@ -17,7 +17,9 @@ def _fake_sweep(experiment, root, out, store, synth="realistic", distances_cm=No
     for name in demo.REPORT_FILES:
         (folder / name.format(table=experiment)).write_text(f"{experiment}\n")
     (folder / "depth_errors" / "01_plate_30_000000.png").write_bytes(b"png")
-    rows = pd.DataFrame({"object": ["01_plate"], "P_cm": [0.1], "timing": ["alone"], "cached": [False]})
+    rows = pd.DataFrame({"object": ["01_plate"], "distance": [30], "method": ["mm2fsk"], "freq": ["d10"],
+                         **{m: [0.1] for m in ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm")}, "timing": ["alone"],
+                         "cached": [False]})
     rows.to_csv(folder / "results.csv", index=False)
     return rows
 
@@ -58,8 +60,9 @@ def test_the_preset_and_distances_reach_generation_and_every_sweep(monkeypatch, 
 def test_update_results_copies_tables_plots_and_baselines(monkeypatch, tmp_path):
     assert _main(monkeypatch, tmp_path, "--update-results") == 0
     results = tmp_path / "results"
-    assert {p.name for p in results.iterdir()} == {"table1.csv", "table1.md", "table2", "table3"}
+    assert {p.name for p in results.iterdir()} == {"table1.csv", "table1.md", "table2", "table3", "agreement.md"}
     assert (results / "table3" / "runtime_vs_error.png").is_file()
+    assert "| MM-2FSK Δ10.0 | 1/1 | 0.10 | 0.82 |" in (results / "agreement.md").read_text()   # from the sweep rows
     assert (results / "table3" / "depth_errors" / "01_plate_30_000000.png").is_file()
     baseline = pd.read_csv(results / "table2" / "results.csv")
     assert "cached" not in baseline and list(baseline.timing) == ["alone"]
