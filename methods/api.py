@@ -24,7 +24,7 @@ from methods.filtering import DEFAULT_THRESHOLD_DB
 from methods.frequencies import config_indices, select_frequencies
 from methods.fsk import DEFAULT_PRIOR_M
 from methods.method import SENSOR_PRIORS, Frame, Method
-from methods.prior import DEFAULT_MAX_JUMP_MM, mesh_prior_m, realsense_prior_m
+from methods.prior import DEFAULT_FILL, DEFAULT_MAX_JUMP_MM, check_fill, mesh_prior_m, realsense_prior_m
 from methods.prior_image import HostPrior, Prior
 from methods.reconstruction import Reconstruction
 from methods.registry import make_method
@@ -58,12 +58,14 @@ def _transform(capture: Capture, key: str) -> np.ndarray:
 
 def prior_image_m(capture: Capture, source: str, grid: RadarGrid, device: str | Backend = "cpu",
                   keep_on_device: bool = False, max_jump_mm: float | None = DEFAULT_MAX_JUMP_MM,
-                  faithful: bool = False) -> Prior:
+                  faithful: bool = False, fill: str = DEFAULT_FILL) -> Prior:
     """Per-pixel prior (ny, nx) in metres on `grid` from 'realsense' or 'photogrammetry' (NaN = no prior), as a
     `Prior`: rasterised on the backend's device with `keep_on_device` where it can (np.asarray copies it back).
 
-    max_jump_mm (RealSense depth-jump rule, None = off) and faithful (the reference's construction) as in
-    methods.prior; other than the defaults they are built on the host."""
+    max_jump_mm (RealSense depth-jump rule, None = off), faithful (the reference's construction) and fill (the
+    hole-fill rule, 'delaunay' | 'scanline') as in methods.prior; a jump rule or construction other than the
+    defaults is built on the host."""
+    check_fill(fill)
     backend = backend_for(device)
     notes = f" ({'; '.join(capture.notes)})" if capture.notes else ""
     on_host = faithful or max_jump_mm != DEFAULT_MAX_JUMP_MM
@@ -73,16 +75,16 @@ def prior_image_m(capture: Capture, source: str, grid: RadarGrid, device: str | 
                              f"has none{notes}")
         if on_host:
             return HostPrior(realsense_prior_m(capture.realsense, _transform(capture, "realsense2radar"), grid,
-                                               max_jump_mm=max_jump_mm, faithful=faithful), grid)
+                                               max_jump_mm=max_jump_mm, faithful=faithful, fill=fill), grid)
         return backend.realsense_prior(capture.realsense, _transform(capture, "realsense2radar"), grid,
-                                       keep_on_device)
+                                       keep_on_device, fill)
     if capture.mesh is None:
         raise UsageError(f"prior='photogrammetry' needs the photogrammetry mesh, but capture {capture.name} "
                          f"has none{notes}")
     if faithful:
         return HostPrior(mesh_prior_m(capture.mesh, _transform(capture, "photogrammetry2radar"), grid,
                                       faithful=True), grid)
-    return backend.mesh_prior(capture.mesh, _transform(capture, "photogrammetry2radar"), grid, keep_on_device)
+    return backend.mesh_prior(capture.mesh, _transform(capture, "photogrammetry2radar"), grid, keep_on_device, fill)
 
 
 def frequency_indices(freqs_hz: np.ndarray, freq: str | Sequence[float] | None) -> np.ndarray:
@@ -136,7 +138,7 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     gets `scalar_prior_m` (default 0.40 m) for 'none'. grid: overrides the frame's grid.
     roi: the skips and region of interest (module doc; 'none' = the full computation). threshold_db: the depth
     filter, dB below the strongest pixel (default 14; None = off). prior_options: how a sensor prior is built
-    (`prior_image_m`'s max_jump_mm and faithful). params: the method's own parameters (its `params`; e.g. band_m
+    (`prior_image_m`'s max_jump_mm, faithful and fill). params: the method's own parameters (its `params`; e.g. band_m
     for BP with a prior, filter_quantity for 2FSK/MM-2FSK).
     A sensor prior that covers no radar pixel (empty mask, object outside the grid) gives an explicit all-invalid
     result: every depth NaN and `invalid_reason` saying why; so does a frame without signal (all zero).

@@ -23,7 +23,7 @@ import functools
 import numpy as np
 
 from methods.domain.capture import DepthFrame, Mesh, RadarGrid
-from methods.prior import mesh_prior_m, realsense_prior_m
+from methods.prior import DEFAULT_FILL, mesh_prior_m, realsense_prior_m
 from methods.prior_image import HostPrior, Prior
 
 DEVICES = ("cpu", "cuda", "auto", "warp-cpu")
@@ -130,14 +130,14 @@ class Backend:
         raise NotImplementedError
 
     def realsense_prior(self, depth: DepthFrame, realsense2radar: np.ndarray, grid: RadarGrid,
-                        keep_on_device: bool = False) -> Prior:
+                        keep_on_device: bool = False, fill: str = DEFAULT_FILL) -> Prior:
         """`methods.prior.realsense_prior_m` as a Prior (on the device with `keep_on_device` where possible)."""
-        return HostPrior(realsense_prior_m(depth, realsense2radar, grid), grid)
+        return HostPrior(realsense_prior_m(depth, realsense2radar, grid, fill=fill), grid)
 
     def mesh_prior(self, mesh: Mesh, photogrammetry2radar: np.ndarray, grid: RadarGrid,
-                   keep_on_device: bool = False) -> Prior:
+                   keep_on_device: bool = False, fill: str = DEFAULT_FILL) -> Prior:
         """`methods.prior.mesh_prior_m` as a Prior (on the device with `keep_on_device` where possible)."""
-        return HostPrior(mesh_prior_m(mesh, photogrammetry2radar, grid), grid)
+        return HostPrior(mesh_prior_m(mesh, photogrammetry2radar, grid, fill=fill), grid)
 
     def depth_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, prior: Prior,
                        threshold_db: float | None, timer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -10,9 +10,12 @@ of all valid pixels (about 4 s for 300k points here). Depth-jump rule (default, 
 triangle is dropped when a checked edge joins camera depths more than `max_jump_mm` (10 mm) apart: a triangle
 across a depth discontinuity (an object's edge in front of the background, or a held object in front of the
 hand) is no surface, and rasterising it would invent depths between the two. `max_jump_mm=None` keeps them.
-Holes: the empty radar pixels inside the convex hull of the covered ones are filled from a Delaunay triangulation
-of the rim of the covered region (`raster.fill_convex_hull`), the same planar interpolation across a hole as the
-paper's Delaunay of all pixels.
+Holes (setting `fill`): 'delaunay' fills the empty radar pixels inside the convex hull of the covered ones from a
+Delaunay triangulation of the rim of the covered region (`raster.fill_convex_hull`), the same planar interpolation
+across a hole as the paper's Delaunay of all pixels; 'scanline' interpolates linearly along each empty pixel's row
+and column between the nearest covered pixels (`raster.fill_scanline`): no triangulation, so a GPU kernel computes
+it exactly (Qhull's tie-breaks between cocircular lattice points set the Delaunay fill's values, and Qhull runs on
+the host only). Both reproduce a plane exactly; README "Hole fill" gives their measured cost and error.
 
 `faithful=True` builds the prior as the reference code does (the faithful profile): it samples pixel (v, u) at
 MAROON's shifted position K^-1 (u + 0.5, v + 0.5) instead of the pixel centre (up to one pixel off at the far
@@ -32,10 +35,20 @@ from scipy.spatial import Delaunay, QhullError
 
 from methods.domain.transforms import apply_transform
 from methods.domain.capture import DepthFrame, Mesh, RadarGrid
-from methods.raster import fill_convex_hull, rasterize_nearest_z
+from methods.domain.errors import UsageError
+from methods.raster import fill_convex_hull, fill_scanline, rasterize_nearest_z
 from metrics.triangulation import lattice_triangles
 
 DEFAULT_MAX_JUMP_MM = 10.0   # MAROON's triangulation threshold in optical spaces (MAROON_FORMAT.md 3.2, 5.2)
+FILLS = {"delaunay": fill_convex_hull, "scanline": fill_scanline}   # hole-fill rules (module doc)
+DEFAULT_FILL = "delaunay"
+
+
+def check_fill(fill: str) -> str:
+    """`fill` if it names a hole-fill rule, else UsageError listing them."""
+    if fill not in FILLS:
+        raise UsageError(f"unknown prior fill {fill!r}; choose one of {', '.join(FILLS)}")
+    return fill
 
 
 def grid_triangles(depth_mm: np.ndarray, valid: np.ndarray, quads: np.ndarray | None = None,
@@ -105,13 +118,15 @@ def delaunay_fill(image: np.ndarray) -> np.ndarray:
 
 
 def rasterize_prior(points_m: np.ndarray, triangles: np.ndarray, grid: RadarGrid,
-                    fill_holes: bool = True, faithful: bool = False) -> np.ndarray:
-    """Nearest-surface radar depth (ny, nx) in metres of a radar-space mesh; NaN where it has no prior."""
+                    fill_holes: bool = True, faithful: bool = False, fill: str = DEFAULT_FILL) -> np.ndarray:
+    """Nearest-surface radar depth (ny, nx) in metres of a radar-space mesh; NaN where it has no prior.
+    fill: the hole-fill rule (module doc; `faithful` always takes the reference's Delaunay of all pixels)."""
+    check_fill(fill)
     cols, rows = _to_radar_pixels(points_m, grid, faithful)
     prior_m = rasterize_nearest_z(cols, rows, points_m[:, 2], triangles, grid.image_shape)
     if not fill_holes:
         return prior_m
-    return delaunay_fill(prior_m) if faithful else fill_convex_hull(prior_m)
+    return delaunay_fill(prior_m) if faithful else FILLS[fill](prior_m)
 
 
 def _bounding_box(valid: np.ndarray) -> tuple[slice, slice]:
@@ -124,10 +139,11 @@ def _bounding_box(valid: np.ndarray) -> tuple[slice, slice]:
 
 def realsense_prior_m(depth: DepthFrame, realsense2radar: np.ndarray, grid: RadarGrid,
                       fill_holes: bool = True, max_jump_mm: float | None = DEFAULT_MAX_JUMP_MM,
-                      faithful: bool = False) -> np.ndarray:
+                      faithful: bool = False, fill: str = DEFAULT_FILL) -> np.ndarray:
     """Radar-grid depth prior (ny, nx) in metres from a RealSense depth frame; NaN = no prior.
 
-    max_jump_mm: the depth-jump rule (module doc; None = off); faithful: the reference's construction."""
+    max_jump_mm: the depth-jump rule (module doc; None = off); faithful: the reference's construction; fill: the
+    hole-fill rule ('delaunay' | 'scanline', module doc)."""
     points_mm, valid = backproject_mm(depth)
     points_m = apply_transform(realsense2radar, points_mm)
     cols, rows = _to_radar_pixels(points_m, grid, faithful)
@@ -141,11 +157,12 @@ def realsense_prior_m(depth: DepthFrame, realsense2radar: np.ndarray, grid: Rada
     index[valid] = np.arange(len(points_mm))
     lattice = grid_triangles(z_mm, valid, quads_around_centres(col_img, row_img), max_jump_mm,
                              "maroon" if faithful else "sound")
-    return rasterize_prior(points_m, index.ravel()[lattice], grid, fill_holes, faithful)
+    return rasterize_prior(points_m, index.ravel()[lattice], grid, fill_holes, faithful, fill)
 
 
 def mesh_prior_m(mesh: Mesh, photogrammetry2radar: np.ndarray, grid: RadarGrid,
-                 fill_holes: bool = True, faithful: bool = False) -> np.ndarray:
-    """Radar-grid depth prior (ny, nx) in metres from the photogrammetry mesh; NaN = no prior."""
+                 fill_holes: bool = True, faithful: bool = False, fill: str = DEFAULT_FILL) -> np.ndarray:
+    """Radar-grid depth prior (ny, nx) in metres from the photogrammetry mesh; NaN = no prior (fill as
+    `realsense_prior_m`)."""
     return rasterize_prior(apply_transform(photogrammetry2radar, mesh.vertices), mesh.triangles, grid, fill_holes,
-                           faithful)
+                           faithful, fill)

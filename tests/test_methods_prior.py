@@ -115,3 +115,64 @@ def test_rim_delaunay_fill_matches_a_delaunay_of_all_covered_pixels():
     assert filled.sum() > 500
     assert np.mean(np.abs(ours - everything)[filled]) < 2e-4
     assert np.max(np.abs(ours - everything)[filled]) < 2e-3
+
+
+def _scanline_by_loops(image: np.ndarray) -> np.ndarray:
+    """`raster.fill_scanline` written pixel by pixel (the specification read literally), float64."""
+    out = image.copy()
+    n_rows, n_cols = image.shape
+    covered = np.isfinite(image)
+    for r in range(n_rows):
+        for c in range(n_cols):
+            if covered[r, c]:
+                continue
+            estimates = []
+            for line, k in ((image[r, :], c), (image[:, c], r)):
+                lo = [i for i in range(k) if np.isfinite(line[i])]
+                hi = [i for i in range(k + 1, len(line)) if np.isfinite(line[i])]
+                if lo and hi:
+                    lo, hi = lo[-1], hi[0]
+                    estimates.append((line[lo] + (line[hi] - line[lo]) * ((k - lo) / (hi - lo)), hi - lo))
+            if len(estimates) == 2:
+                (z_r, s_r), (z_c, s_c) = estimates
+                out[r, c] = (z_r * s_c + z_c * s_r) / (s_r + s_c)
+            elif estimates:
+                out[r, c] = estimates[0][0]
+    return out
+
+
+def test_scanline_fill_equals_its_pixel_by_pixel_definition_on_random_images():
+    from methods.raster import fill_scanline
+    rng = np.random.default_rng()
+    for _ in range(4):
+        shape = tuple(rng.integers(5, 40, 2))
+        image = rng.uniform(0.2, 0.4, shape)
+        image[rng.random(shape) < rng.uniform(0.2, 0.9)] = np.nan
+        expected = _scanline_by_loops(image)
+        got = fill_scanline(image)
+        assert np.array_equal(np.isfinite(got), np.isfinite(expected))
+        assert np.max(np.abs(got - expected), where=np.isfinite(expected), initial=0.0) < 1e-15
+
+
+def test_scanline_fill_reproduces_a_plane_and_fills_what_delaunay_fills_but_concave_notches():
+    from methods.raster import fill_scanline
+    rows, cols = np.mgrid[:60, :60].astype(float)
+    truth = 0.3 + 0.001 * cols - 0.002 * rows
+    image = truth.copy()
+    image[(rows - 30) ** 2 + (cols - 30) ** 2 > 25 ** 2] = np.nan        # a disk ...
+    image[(cols > 40) & (rows < 20)] = np.nan                             # ... with a notch at its rim
+    holes = ((rows - 30) ** 2 + (cols - 25) ** 2 < 6 ** 2) | ((rows - 40) ** 2 + (cols - 40) ** 2 < 3 ** 2)
+    image[holes] = np.nan                                                 # ... and two holes
+    filled = fill_scanline(image)
+    assert np.all(np.isfinite(filled[holes]))
+    assert np.max(np.abs(filled - truth), where=np.isfinite(filled), initial=0.0) < 1e-12
+    delaunay = fill_convex_hull(image)
+    assert not np.any(np.isfinite(filled) & np.isnan(delaunay))          # never beyond the convex hull
+    assert np.isnan(filled[5, 50]) and np.isfinite(delaunay[12, 43])     # the notch's far corner stays empty
+
+
+def test_unknown_fill_is_a_usage_error():
+    from methods.domain.errors import UsageError
+    frame = plane_depth_frame(*PLANE, realsense2radar())
+    with pytest.raises(UsageError, match="scanline"):
+        realsense_prior_m(frame, realsense2radar(), GRID, fill="nearest")

@@ -8,6 +8,7 @@ import warp as wp
 from methods import range_compression
 from methods.backend import Backend, check_inputs, grid_vectors
 from methods.filtering import DEFAULT_THRESHOLD_DB
+from methods.prior import DEFAULT_FILL
 from methods.prior_image import Prior
 from methods.timing import StageTimer
 from methods.warp_backend import correlation, fsk, prior
@@ -96,15 +97,17 @@ class WarpBackend(Backend):
         return correlation.volume_peak(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m,
                                        kernel=self._volume_kernel(freqs_hz, "auto"), timer=timer)
 
-    def realsense_prior(self, depth, realsense2radar, grid, keep_on_device: bool = False) -> Prior:
+    def realsense_prior(self, depth, realsense2radar, grid, keep_on_device: bool = False,
+                        fill: str = DEFAULT_FILL) -> Prior:
         if keep_on_device and self.rasterises_prior:
-            return prior.realsense_prior(self.buffers, depth, realsense2radar, grid)
-        return super().realsense_prior(depth, realsense2radar, grid)
+            return prior.realsense_prior(self.buffers, depth, realsense2radar, grid, fill=fill)
+        return super().realsense_prior(depth, realsense2radar, grid, fill=fill)
 
-    def mesh_prior(self, mesh, photogrammetry2radar, grid, keep_on_device: bool = False) -> Prior:
+    def mesh_prior(self, mesh, photogrammetry2radar, grid, keep_on_device: bool = False,
+                   fill: str = DEFAULT_FILL) -> Prior:
         if keep_on_device and self.rasterises_prior:
-            return prior.mesh_prior(self.buffers, mesh, photogrammetry2radar, grid)
-        return super().mesh_prior(mesh, photogrammetry2radar, grid)
+            return prior.mesh_prior(self.buffers, mesh, photogrammetry2radar, grid, fill=fill)
+        return super().mesh_prior(mesh, photogrammetry2radar, grid, fill=fill)
 
     def depth_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid, prior: Prior,
                        threshold_db: float | None = DEFAULT_THRESHOLD_DB, timer=None):

@@ -8,6 +8,9 @@ then does `hull_fill.fill_hull` run: the rim pixels are found on the device, the
 to the host for scipy's Delaunay triangulation, and its triangles are rasterised into the empty pixels on the
 device (exact). One 8-byte copy back decides. A prior with nothing to fill (e.g. a surface that covers the whole
 radar grid) never leaves the GPU.
+
+Scanline fill (prior fill 'scanline', `raster.fill_scanline`): one kernel over the pixels after the coverage
+kernel, no host work; the prior never leaves the GPU (one 8-byte copy back of the pixel counts).
 """
 from __future__ import annotations
 
@@ -17,7 +20,7 @@ import warp as wp
 from methods.domain.transforms import apply_transform
 from methods.domain.capture import DepthFrame, Mesh, RadarGrid
 from methods.prior_image import Prior
-from methods.prior import DEFAULT_MAX_JUMP_MM
+from methods.prior import DEFAULT_FILL, DEFAULT_MAX_JUMP_MM, check_fill
 from methods.warp_backend import prior_kernels as kernels
 from methods.warp_backend.frames import BufferPool
 from methods.warp_backend.hull_fill import fill_hull
@@ -53,7 +56,7 @@ def coverage(zbuf, stats, ny: int, nx: int, hull: bool = True) -> tuple[int, int
     """(covered pixels, lattice points of their convex hull (0 unless `hull`)) of a cleared-then-rasterised
     z-buffer: one 8-byte copy back."""
     dev = zbuf.device
-    wp.launch(kernels.covered_spans, dim=ny * nx, inputs=[nx, zbuf, stats], device=dev)
+    wp.launch(kernels.covered_spans, dim=ny * nx, inputs=[ny, nx, zbuf, stats], device=dev)
     if hull:
         wp.launch(kernels.hull_rows, dim=(ny, ny), inputs=[ny, stats], device=dev)
         wp.launch(kernels.hull_lattice_count, dim=ny, inputs=[ny, stats], device=dev)
@@ -61,7 +64,20 @@ def coverage(zbuf, stats, ny: int, nx: int, hull: bool = True) -> tuple[int, int
     return n_covered, n_hull
 
 
-def _finish(buffers: BufferPool, zbuf, stats, grid, fill_holes: bool) -> DevicePrior:
+def _scanline_finish(zbuf, stats, grid) -> DevicePrior:
+    """Coverage, then `raster.fill_scanline` into a new buffer on the device; one 8-byte copy back."""
+    ny, nx = grid.image_shape
+    dev = zbuf.device
+    filled = wp.empty(ny * nx, dtype=wp.float64, device=dev)
+    wp.launch(kernels.covered_spans, dim=ny * nx, inputs=[ny, nx, zbuf, stats], device=dev)
+    wp.launch(kernels.scanline_fill, dim=ny * nx, inputs=[ny, nx, zbuf, stats, filled], device=dev)
+    n_covered, n_filled = (int(v) for v in stats[:2].numpy())
+    return DevicePrior(filled, grid, n_covered + n_filled, n_filled > 0)
+
+
+def _finish(buffers: BufferPool, zbuf, stats, grid, fill_holes: bool, fill: str = DEFAULT_FILL) -> DevicePrior:
+    if fill_holes and check_fill(fill) == "scanline":
+        return _scanline_finish(zbuf, stats, grid)
     ny, nx = grid.image_shape
     n_covered, n_hull = coverage(zbuf, stats, ny, nx, hull=fill_holes)
     filled = False
@@ -76,14 +92,16 @@ def cleared_zbuffer(buffers: BufferPool, grid: RadarGrid):
     dev = buffers.wp_device
     ny, nx = grid.image_shape
     zbuf = wp.empty(ny * nx, dtype=wp.float64, device=dev)       # owned by the DevicePrior
-    stats = buffers.get("prior.stats", 2 + 4 * ny, wp.int32)
+    stats = buffers.get("prior.stats", 2 + 4 * ny + 2 * nx, wp.int32)
     wp.launch(kernels.clear_zbuffer, dim=ny * nx, inputs=[ny, zbuf, stats], device=dev)
     return zbuf, stats
 
 
 def realsense_prior(buffers: BufferPool, depth: DepthFrame, realsense2radar: np.ndarray, grid: RadarGrid,
-                    fill_holes: bool = True, max_jump_mm: float | None = DEFAULT_MAX_JUMP_MM) -> DevicePrior:
-    """`prior.realsense_prior_m` on the pool's Warp device (max_jump_mm: the depth-jump rule, None = off)."""
+                    fill_holes: bool = True, max_jump_mm: float | None = DEFAULT_MAX_JUMP_MM,
+                    fill: str = DEFAULT_FILL) -> DevicePrior:
+    """`prior.realsense_prior_m` on the pool's Warp device (max_jump_mm: the depth-jump rule, None = off; fill:
+    the hole-fill rule)."""
     zbuf, stats = cleared_zbuffer(buffers, grid)
     dev = buffers.wp_device
     height, width = depth.depth_mm.shape
@@ -101,11 +119,11 @@ def realsense_prior(buffers: BufferPool, depth: DepthFrame, realsense2radar: np.
     wp.launch(kernels.raster_camera_quads, dim=(height - 1) * (width - 1),
               inputs=[d_img, m_img, int(depth.mask is not None), cam, xf,
                       wp.float64(-1.0 if max_jump_mm is None else max_jump_mm), ny, nx, zbuf], device=dev)
-    return _finish(buffers, zbuf, stats, grid, fill_holes)
+    return _finish(buffers, zbuf, stats, grid, fill_holes, fill)
 
 
 def mesh_prior(buffers: BufferPool, mesh: Mesh, photogrammetry2radar: np.ndarray, grid: RadarGrid,
-               fill_holes: bool = True) -> DevicePrior:
+               fill_holes: bool = True, fill: str = DEFAULT_FILL) -> DevicePrior:
     """`prior.mesh_prior_m` on the pool's Warp device (vertices transformed on the host)."""
     zbuf, stats = cleared_zbuffer(buffers, grid)
     dev = buffers.wp_device
@@ -118,4 +136,4 @@ def mesh_prior(buffers: BufferPool, mesh: Mesh, photogrammetry2radar: np.ndarray
         wp.launch(kernels.raster_mesh_triangles, dim=len(tris),
                   inputs=[wp.array(verts, dtype=wp.vec3d, device=dev), wp.array(tris, dtype=wp.vec3i, device=dev),
                           ny, nx, zbuf], device=dev)
-    return _finish(buffers, zbuf, stats, grid, fill_holes)
+    return _finish(buffers, zbuf, stats, grid, fill_holes, fill)

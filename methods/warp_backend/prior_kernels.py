@@ -11,8 +11,10 @@
   crossings, inclusive 1e-9 px epsilon, plane evaluation), nearest z kept with a float64 `atomic_min` z-buffer.
   Camera pixels are smaller than radar pixels, so a triangle covers 0-2 centres and the loops stay short.
 * `covered_spans`, `hull_rows`, `hull_lattice_count`: the covered pixel count, each row's first/last covered
-  column, and, exactly in integer arithmetic, the lattice points of the convex hull of the covered pixels (the
-  input of the host's decision whether `raster.fill_convex_hull` can add pixels).
+  column and each column's first/last covered row, and, exactly in integer arithmetic, the lattice points of the
+  convex hull of the covered pixels (the input of the host's decision whether `raster.fill_convex_hull` can add
+  pixels).
+* `scanline_fill`: `raster.fill_scanline` (prior fill 'scanline'), one thread per pixel, into a second buffer.
 """
 from __future__ import annotations
 
@@ -175,8 +177,8 @@ def raster_mesh_triangles(verts: wp.array(dtype=wp.vec3d), tris: wp.array(dtype=
 
 @wp.kernel(enable_backward=False)
 def clear_zbuffer(n_rows: int, zbuf: wp.array(dtype=wp.float64), stats: wp.array(dtype=wp.int32)):
-    """z-buffer = FAR (1e300, no prior); stats = [covered, hull lattice points, (first col, last col) per row,
-    (hull first col, hull last col) per row]."""
+    """z-buffer = FAR (1e300, no prior); stats = [covered, hull lattice points or pixels filled, (first col, last
+    col) per row, (hull first col, hull last col) per row, (first row, last row) per column]."""
     p = wp.tid()
     zbuf[p] = FAR
     if p < n_rows:
@@ -184,14 +186,18 @@ def clear_zbuffer(n_rows: int, zbuf: wp.array(dtype=wp.float64), stats: wp.array
         stats[3 + 2 * p] = -1
         stats[2 + 2 * n_rows + 2 * p] = 2147483647
         stats[3 + 2 * n_rows + 2 * p] = -1
+    if p < zbuf.shape[0] // n_rows:
+        stats[2 + 4 * n_rows + 2 * p] = 2147483647
+        stats[3 + 4 * n_rows + 2 * p] = -1
     if p == 0:
         stats[0] = 0
         stats[1] = 0
 
 
 @wp.kernel(enable_backward=False)
-def covered_spans(n_cols: int, zbuf: wp.array(dtype=wp.float64), stats: wp.array(dtype=wp.int32)):
-    """Covered-pixel count and each row's first and last covered column (input of the hull test)."""
+def covered_spans(n_rows: int, n_cols: int, zbuf: wp.array(dtype=wp.float64), stats: wp.array(dtype=wp.int32)):
+    """Covered-pixel count, each row's first and last covered column (input of the hull test) and each column's
+    first and last covered row (of the scanline fill)."""
     p = wp.tid()
     if zbuf[p] < FAR:
         r = p // n_cols
@@ -199,6 +205,8 @@ def covered_spans(n_cols: int, zbuf: wp.array(dtype=wp.float64), stats: wp.array
         wp.atomic_add(stats, 0, 1)
         wp.atomic_min(stats, 2 + 2 * r, c)
         wp.atomic_max(stats, 3 + 2 * r, c)
+        wp.atomic_min(stats, 2 + 4 * n_rows + 2 * c, r)
+        wp.atomic_max(stats, 3 + 4 * n_rows + 2 * c, r)
 
 
 @wp.kernel(enable_backward=False)
@@ -237,3 +245,48 @@ def hull_lattice_count(n_rows: int, stats: wp.array(dtype=wp.int32)):
     hi = stats[3 + 2 * n_rows + 2 * r]
     if hi >= lo:
         wp.atomic_add(stats, 1, hi - lo + 1)
+
+
+@wp.func
+def line_estimate(zbuf: wp.array(dtype=wp.float64), base: int, stride: int, k: int, first: int, last: int):
+    """`raster._span_estimate` for the empty pixel at position k of the line base + i * stride whose first and last
+    covered positions are `first`, `last` (last < 0: none): (linear interpolation between the nearest covered
+    pixels on either side, their distance in pixels), or (0, 0) where a side has none."""
+    if last < 0 or k < first or k > last:
+        return wp.float64(0.0), int(0)
+    lo = k - 1
+    while zbuf[base + lo * stride] >= FAR:
+        lo -= 1
+    hi = k + 1
+    while zbuf[base + hi * stride] >= FAR:
+        hi += 1
+    span = hi - lo
+    z_lo = zbuf[base + lo * stride]
+    z_hi = zbuf[base + hi * stride]
+    return z_lo + (z_hi - z_lo) * (wp.float64(k - lo) / wp.float64(span)), span
+
+
+@wp.kernel(enable_backward=False)
+def scanline_fill(n_rows: int, n_cols: int, zbuf: wp.array(dtype=wp.float64), stats: wp.array(dtype=wp.int32),
+                  out: wp.array(dtype=wp.float64)):
+    """`raster.fill_scanline` of the z-buffer into `out` (covered pixels copied; stats[1] += pixels filled): row
+    and column interpolations weighted by 1 / span, z = (z_r s_c + z_c s_r) / (s_r + s_c)."""
+    p = wp.tid()
+    z = zbuf[p]
+    if z < FAR:
+        out[p] = z
+        return
+    r = p // n_cols
+    c = p % n_cols
+    z_r, s_r = line_estimate(zbuf, r * n_cols, 1, c, stats[2 + 2 * r], stats[3 + 2 * r])
+    z_c, s_c = line_estimate(zbuf, c, n_cols, r, stats[2 + 4 * n_rows + 2 * c], stats[3 + 4 * n_rows + 2 * c])
+    if s_r > 0 and s_c > 0:
+        out[p] = (z_r * wp.float64(s_c) + z_c * wp.float64(s_r)) / wp.float64(s_r + s_c)
+    elif s_r > 0:
+        out[p] = z_r
+    elif s_c > 0:
+        out[p] = z_c
+    else:
+        out[p] = FAR
+        return
+    wp.atomic_add(stats, 1, 1)
