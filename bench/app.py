@@ -182,10 +182,16 @@ def _profile_params(cfg: DictConfig, target: str) -> dict:
 
 def _prior_options(cfg: DictConfig) -> dict:
     """How a sensor prior is built (methods.api.prior_image_m): the profile's construction and, for the RealSense,
-    the depth-jump rule `prior.max_jump_mm` (null = off; the default where the prior config does not set it)."""
-    from methods.prior import DEFAULT_MAX_JUMP_MM
+    the depth-jump rule `prior.max_jump_mm` (null = off; the default where the prior config does not set it), and
+    for a sensor prior the hole fill `prior.fill` (delaunay | scanline; methods.prior)."""
+    from methods.prior import DEFAULT_FILL, DEFAULT_MAX_JUMP_MM, FILLS
 
     options = {"faithful": cfg.profile.prior == "faithful"}
+    if cfg.prior.name in ("realsense", "photogrammetry"):
+        fill = OmegaConf.select(cfg, "prior.fill", default=DEFAULT_FILL)
+        if fill not in FILLS:
+            raise cli.UserError(f"prior.fill={fill}", f"must be one of {', '.join(FILLS)}")
+        options["fill"] = fill
     if cfg.prior.name == "realsense":
         value = OmegaConf.select(cfg, "prior.max_jump_mm", default=DEFAULT_MAX_JUMP_MM)
         if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0):

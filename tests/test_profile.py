@@ -34,9 +34,22 @@ def test_the_profile_reaches_the_methods_and_the_prior():
     assert _method(faithful).values["filter_quantity"] == "first"
     assert _method(_compose("profile=faithful", "method=2fsk", "prior=none")).values["filter_quantity"] == "first"
     assert "filter_quantity" not in _method(_compose("profile=faithful", "method=bp", "prior=none")).values
-    assert _prior_options(sound) == {"faithful": False, "max_jump_mm": 10.0}
-    assert _prior_options(faithful) == {"faithful": True, "max_jump_mm": 10.0}
-    assert _prior_options(_compose("prior.max_jump_mm=null")) == {"faithful": False, "max_jump_mm": None}
+    fill = sound.prior.fill
+    assert _prior_options(sound) == {"faithful": False, "max_jump_mm": 10.0, "fill": fill}
+    assert _prior_options(faithful) == {"faithful": True, "max_jump_mm": 10.0, "fill": fill}
+    assert _prior_options(_compose("prior.max_jump_mm=null")) == {"faithful": False, "max_jump_mm": None, "fill": fill}
+    assert _prior_options(_compose("prior.fill=scanline"))["fill"] == "scanline"
+    assert _prior_options(_compose("prior=none")) == {"faithful": False}
+
+
+def test_an_unknown_prior_fill_is_one_error_line():
+    import pytest
+
+    from bench import cli
+    from bench.app import _prior_options
+
+    with pytest.raises(cli.UserError, match="delaunay, scanline"):
+        _prior_options(_compose("prior.fill=nearest"))
 
 
 def test_faithful_filter_keeps_pixels_by_the_first_frequencys_magnitude():
