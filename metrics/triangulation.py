@@ -40,40 +40,36 @@ def valid_points(depth: np.ndarray) -> np.ndarray:
         return np.isfinite(z) & (np.abs(z) >= 1e-3)
 
 
-def lattice_triangles(depth: np.ndarray, threshold: float | None, rule: str = "sound",
-                      quads: np.ndarray | None = None, valid: np.ndarray | None = None) -> np.ndarray:
-    """(T, 3) flat pixel indices (row * W + col) of the triangles of `depth` (H, W; NaN or 0 = invalid).
-
-    threshold: largest depth jump along a checked edge (same units as `depth`), None = no check; rule: 'sound' or
-    'maroon' (three-valid quads, module doc); quads: optional (H-1, W-1) bool restricting the quads considered;
-    valid: optional (H, W) validity replacing `valid_points(depth)`.
-    """
+def _picks(depth: np.ndarray, threshold: float | None, rule: str, quads: np.ndarray | None,
+           valid: np.ndarray | None) -> list[tuple[np.ndarray, tuple[str, str, str]]]:
+    """The triangles of `depth` as (H-1, W-1) bool quad selections, each with its corner names, in the order
+    `lattice_triangles` lists them (arguments as there)."""
     if rule not in RULES:
         raise ValueError(f"unknown triangulation rule {rule!r}; choose one of {', '.join(RULES)}")
     z = np.asarray(depth, dtype=np.float64)
     valid = valid_points(z) if valid is None else np.asarray(valid, dtype=bool)
-    if min(z.shape) < 2:
-        return np.zeros((0, 3), dtype=np.int64)
     z = np.where(valid, z, 0.0)
-    height, width = z.shape
-    index = np.arange(height * width).reshape(height, width)
     zs = {name: z[sl] for name, sl in _CORNERS.items()}
     vs = {name: valid[sl] for name, sl in _CORNERS.items()}
-    ids = {name: index[sl] for name, sl in _CORNERS.items()}
     region = np.ones_like(vs["00"]) if quads is None else np.asarray(quads, dtype=bool)
     n_valid = vs["00"].astype(np.int8) + vs["01"] + vs["10"] + vs["11"]
+    jumps_ok: dict[frozenset, np.ndarray] = {}       # each edge's check once: the rules share edges
 
     def close(pairs):
-        ok = np.ones_like(region)
+        ok = region.copy()
         if threshold is not None:
             for a, b in pairs:
-                ok &= np.abs(zs[a] - zs[b]) <= threshold
+                edge = frozenset((a, b))
+                if edge not in jumps_ok:
+                    jumps_ok[edge] = np.abs(zs[a] - zs[b]) <= threshold
+                ok &= jumps_ok[edge]
         return ok
 
     picks = []
+    four = n_valid == 4
     for corners, pairs in _FULL_QUAD:
-        picks.append((region & (n_valid == 4) & close(pairs), corners))
-    three = region & (n_valid == 3)
+        picks.append((four & close(pairs), corners))
+    three = n_valid == 3
     if rule == "sound":
         for missing in ("00", "01", "10", "11"):
             corners = tuple(name for name in ("00", "01", "10", "11") if name != missing)
@@ -88,12 +84,34 @@ def lattice_triangles(depth: np.ndarray, threshold: float | None, rule: str = "s
             for name in corners:
                 ok &= vs[name]
             picks.append((ok, corners))
-    return np.concatenate([np.column_stack([ids[name][sel] for name in corners]) for sel, corners in picks])
+    return picks
+
+
+def lattice_triangles(depth: np.ndarray, threshold: float | None, rule: str = "sound",
+                      quads: np.ndarray | None = None, valid: np.ndarray | None = None) -> np.ndarray:
+    """(T, 3) flat pixel indices (row * W + col) of the triangles of `depth` (H, W; NaN or 0 = invalid).
+
+    threshold: largest depth jump along a checked edge (same units as `depth`), None = no check; rule: 'sound' or
+    'maroon' (three-valid quads, module doc); quads: optional (H-1, W-1) bool restricting the quads considered;
+    valid: optional (H, W) validity replacing `valid_points(depth)`.
+    """
+    if rule not in RULES:
+        raise ValueError(f"unknown triangulation rule {rule!r}; choose one of {', '.join(RULES)}")
+    if min(np.shape(depth)) < 2:
+        return np.zeros((0, 3), dtype=np.int64)
+    height, width = np.shape(depth)
+    ids = {name: np.arange(height * width).reshape(height, width)[sl] for name, sl in _CORNERS.items()}
+    return np.concatenate([np.column_stack([ids[name][sel] for name in corners])
+                           for sel, corners in _picks(depth, threshold, rule, quads, valid)])
 
 
 def triangulated_vertices(depth_m: np.ndarray, threshold_m: float = 0.01, rule: str = "sound") -> np.ndarray:
     """(ny, nx) bool: pixels that are a vertex of at least one triangle; `depth_m` NaN (or 0) = invalid."""
     depth_m = np.asarray(depth_m, dtype=np.float64)
-    used = np.zeros(depth_m.size, dtype=bool)
-    used[lattice_triangles(depth_m, threshold_m, rule).ravel()] = True
-    return used.reshape(depth_m.shape)
+    used = np.zeros(depth_m.shape, dtype=bool)
+    if min(depth_m.shape) < 2:
+        return used
+    for selected, corners in _picks(depth_m, threshold_m, rule, None, None):   # masks, no triangle index lists
+        for name in corners:
+            used[_CORNERS[name]] |= selected
+    return used
