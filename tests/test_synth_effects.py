@@ -280,3 +280,40 @@ def test_skipped_sideways_samples_change_the_frame_by_less_than_1e4():
     config = dataclasses.replace(SynthConfig(), scattering="specular")
     skipped = radar_scene._simulate(samples, samples.areas_m2, points, lobe, config, antennas, freqs)
     assert np.abs(skipped - full).max() < 1e-4 * np.abs(full).max()
+
+
+def test_ground_truth_smoothing_rounds_edges_flattens_ripples_and_keeps_flat_faces():
+    """MAROON's smoothed photogrammetry mesh (30 Laplacian steps): flat faces stay put, edges round off inward,
+    ripples lose amplitude with every step, the mesh stays closed with its winding; 0 steps = the exact mesh."""
+    from bench.synth.meshes import extrude_strip, indexed, triangle_normals
+    from bench.synth.photogrammetry import smoothed_mesh
+
+    plate = extrude_strip(np.array([-0.06, 0.06]), [0.3, 0.3], [0.304, 0.304], 0.12)
+    assert smoothed_mesh(plate, 0, 0) is plate
+    smooth = smoothed_mesh(plate, 30, 1)
+    vertices = smooth.reshape(-1, 3)
+    centre = np.linalg.norm(vertices[:, :2], axis=1) < 0.02                 # the face's middle: no neighbour off it
+    assert np.abs(vertices[centre & (vertices[:, 2] < 0.302), 2] - 0.3).max() < 1e-9
+    assert 0.05 < np.abs(vertices[:, 0]).max() < 0.06 - 5e-4                # edges pulled in by more than 0.5 mm
+
+    def faces_per_edge(tris):
+        _, triangles = indexed(tris)
+        edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        return np.bincount(np.unique(edges, axis=0, return_counts=True)[1])
+
+    # connectivity kept: the subdivided mesh's edges (each of the extrusion's few seam edges split in two)
+    assert list(faces_per_edge(smooth)) == list(faces_per_edge(smoothed_mesh(plate, 0, 1)))
+    assert faces_per_edge(smooth)[1] == 2 * faces_per_edge(plate)[1]
+    volume = np.einsum("ij,ij->i", smooth[:, 0], np.cross(smooth[:, 1], smooth[:, 2])).sum() / 6
+    assert 0.8 * 0.12 * 0.12 * 0.004 < volume < 0.12 * 0.12 * 0.004        # outward winding kept; it shrinks
+    x = np.linspace(-0.07, 0.07, 57)
+    front = 0.3 + 0.005 * np.sin(2 * np.pi * x / 0.03)
+    sheet = extrude_strip(x, front, front + 0.003, 0.12)
+    amplitudes = []
+    for steps in (0, 10, 30):
+        tris = smoothed_mesh(sheet, steps, 1)
+        normals, _ = triangle_normals(tris)
+        inner = (np.abs(tris[..., 0]).max(axis=1) < 0.05) & (np.abs(tris[..., 1]).max(axis=1) < 0.03)
+        facing = tris[(normals[:, 2] < -0.5) & inner]                     # the front, away from its edges
+        amplitudes.append(np.ptp(facing[..., 2]) / 2)
+    assert amplitudes[0] == pytest.approx(0.005, abs=2e-4) and amplitudes[0] > amplitudes[1] > amplitudes[2] > 0.002

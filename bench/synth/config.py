@@ -80,6 +80,8 @@ class SynthConfig:
     # ground truth (photogrammetry mesh to radar registration residual)
     gt_registration_mm: float = 0.0
     gt_registration_deg: float = 0.0
+    gt_smoothing_steps: int = 0              # Laplacian steps on the mesh (MAROON's reference: 30; photogrammetry.py)
+    gt_mesh_subdivisions: int = 0            # midpoint subdivisions before smoothing (1: ~1.25 mm vertex spacing)
 
     def validate(self) -> None:
         """Raise ValueError with a one-line message for settings that cannot produce a valid capture."""
@@ -103,6 +105,8 @@ class SynthConfig:
                  self.gt_registration_mm, self.gt_registration_deg) >= 0, "effect strengths must be >= 0"),
             (0 <= self.wall_reflection <= 1, "wall_reflection must be in [0, 1]"),
             (self.amplitude_scale > 0 and self.if_bandwidth_hz > 0, "amplitude_scale and if_bandwidth_hz must be > 0"),
+            (self.gt_smoothing_steps >= 0 and 0 <= self.gt_mesh_subdivisions <= 2,
+             "gt_smoothing_steps must be >= 0 and gt_mesh_subdivisions in 0..2"),
         ]
         for ok, message in checks:
             if not ok:
@@ -151,6 +155,7 @@ EFFECTS: dict[str, dict] = {
     "mount": {"mount": False},
     "datasheet noise": {"noise_model": "snr"},
     "ground-truth registration": {"gt_registration_mm": 0.0, "gt_registration_deg": 0.0},
+    "ground-truth smoothing": {"gt_smoothing_steps": 0, "gt_mesh_subdivisions": 0},
 }
 
 PRESETS: dict[str, SynthConfig] = {
@@ -160,7 +165,7 @@ PRESETS: dict[str, SynthConfig] = {
         slant_bias_px=0.3, depth_scale_error=0.01, radar_materials=True, scattering="specular", element_exponent=1.0,
         transmission=True, channel_amplitude_db=0.5, channel_phase_deg=5.0, clutter_model="scene",
         wall_distance_m=2.0, mount=True, noise_model="datasheet", amplitude_scale=PLATE_AMPLITUDE_SCALE,
-        gt_registration_mm=1.0, gt_registration_deg=0.2),
+        gt_registration_mm=1.0, gt_registration_deg=0.2, gt_smoothing_steps=30, gt_mesh_subdivisions=1),
 }
 DEFAULT_PRESET = "realistic"     # of the demo, the Hydra app and the committed results
 

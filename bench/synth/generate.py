@@ -21,7 +21,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from bench.synth import depth_camera, motion, ownership, radar_scene, writer
+from bench.synth import depth_camera, motion, ownership, photogrammetry, radar_scene, writer
 from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
 from bench.synth.meshes import rotation_matrix
 from bench.synth.scenes import CATALOGUE, build_scene
@@ -98,7 +98,9 @@ def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config:
     rs2radar = nominal.realsense2radar()
     # the mesh is registered with a residual: the stored photogrammetry2radar maps it slightly off the true object
     true_photo2radar = _registration_residual(config, photo_rng) @ photo2radar
-    mesh_photo = (scene.tris_m - true_photo2radar[:3, 3]) @ true_photo2radar[:3, :3]   # R^T (p - t), row vectors
+    # the mesh as MAROON's pipeline delivers it: reconstructed, then Laplacian-smoothed (photogrammetry.smoothed_mesh)
+    truth_m = photogrammetry.smoothed_mesh(scene.tris_m, config.gt_smoothing_steps, config.gt_mesh_subdivisions)
+    mesh_photo = (truth_m - true_photo2radar[:3, 3]) @ true_photo2radar[:3, :3]   # R^T (p - t), row vectors
     writer.write_mesh_obj(capture_dir / "photogrammetry" / "mesh_masked_smoothed.obj", mesh_photo)
     writer.write_alignment(capture_dir, {"realsense2radar": rs2radar, "photogrammetry2radar": photo2radar,
                                          "photogrammetry2realsense": np.linalg.inv(rs2radar) @ photo2radar,

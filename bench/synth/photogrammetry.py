@@ -11,6 +11,14 @@ Beside `mesh_masked_smoothed.obj` (the ground truth every reader uses) we write:
   minimal Metashape-style `cams.xml` with that camera: its sensor (resolution, focal length f in pixels, cx/cy as
   offsets from the image centre, Metashape's convention) and its 4x4 camera-to-chunk transform (row-major).
 The radar metrics never use the camera: the reference reads it only to size a mask. Our reader ignores all of it.
+
+`smoothed_mesh` is the ground truth's smoothing (SynthConfig `gt_smoothing_steps`): MAROON's reference builds
+`mesh_masked_smoothed.obj` from the Metashape mesh by pymeshlab's coordinate Laplacian smoothing, 30 steps
+(MAROON_FORMAT.md 4.2), which rounds edges and flattens ripples of the reconstructed surface; we apply the same
+number of uniform-weight Laplacian steps to the exact mesh refined by `gt_mesh_subdivisions` midpoint subdivisions
+(1: ~1.25 mm vertex spacing, standing for the dense MVS mesh's; the smoothing's reach scales with that spacing, an
+assumption: Metashape's spacing for these captures is not published). `mesh_masked.obj` stays a copy of the file
+we write (the reference only checks it exists).
 """
 from __future__ import annotations
 
@@ -27,6 +35,35 @@ FOCAL_PX = 400.0
 CAMERA_STANDOFF_M = 0.30          # camera distance in front of the mesh's nearest point along +z
 GT_MESH_NAME = "mesh_masked_smoothed.obj"
 UNSMOOTHED_MESH_NAME = "mesh_masked.obj"
+
+
+def smoothed_mesh(tris_m: np.ndarray, steps: int, subdivisions: int = 1) -> np.ndarray:
+    """The closed triangle soup `tris_m` (T, 3, 3) m refined by `subdivisions` midpoint subdivisions (4x the
+    triangles each) and smoothed by `steps` uniform Laplacian steps, each moving every vertex to the mean of itself
+    and its neighbours across every face it shares with them (VCG's coordinate Laplacian with uniform weights).
+    Returns a soup of the same winding; `steps=0` and `subdivisions=0` return `tris_m` itself."""
+    from scipy import sparse
+
+    from bench.synth.meshes import indexed
+
+    if steps == 0 and subdivisions == 0:
+        return tris_m
+    vertices, triangles = indexed(tris_m)
+    for _ in range(subdivisions):
+        edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+        unique, index = np.unique(edges, axis=0, return_inverse=True)
+        mids = len(vertices) + index.reshape(3, -1).T              # (T, 3): midpoints of edges 01, 12, 20
+        vertices = np.concatenate([vertices, vertices[unique].mean(axis=1)])
+        a, b, c = triangles.T
+        ab, bc, ca = mids.T
+        triangles = np.concatenate([np.stack(t, 1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    rows = triangles[:, [0, 1, 1, 2, 2, 0]].ravel()
+    cols = triangles[:, [1, 0, 2, 1, 0, 2]].ravel()
+    adjacency = sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(vertices),) * 2)
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    for _ in range(steps):
+        vertices = (vertices + adjacency @ vertices) / (1.0 + degree)[:, None]
+    return vertices[triangles]
 
 
 def camera_to_photo(vertices_m: np.ndarray) -> np.ndarray:
