@@ -15,9 +15,9 @@ submitting process and before anything is submitted:
   `timeout_min: 0`, a time limit from the cell (`time_limit_min`).
 
 Then it waits for every job without relying on accounting: a job is done when submitit's result file appears, and
-dead when SLURM no longer lists it (squeue) and no result came; its cause comes from `sacct` (accounting) or
-`scontrol` (the controller), else from its log (time limit, cancellation, out of memory, the job's own `error:`
-line). When any job did not finish, the rows of the jobs that did are merged (bench.sweep), each missing cell is
+dead when SLURM no longer lists it (squeue) and no result came; its cause comes from `sacct` (accounting: state,
+exit code, run time, the steps' MaxRSS against ReqMem) or `scontrol` (the controller), and from its log (time limit,
+cancellation, out of memory, the job's own `error:` line); the message says which of them it read. When any job did not finish, the rows of the jobs that did are merged (bench.sweep), each missing cell is
 named with its cause on stderr, and the sweep exits 1. A re-run of the same command recomputes only the missing
 cells (the store).
 """
@@ -29,6 +29,7 @@ import re
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from hydra.core.singleton import Singleton
@@ -106,40 +107,83 @@ def listed_jobs() -> set[str] | None:
     return set(proc.stdout.split()) if proc.returncode == 0 else None
 
 
-def slurm_state(job_id: str) -> str:
-    """SLURM's word for how a job ended: sacct (accounting), else scontrol (the controller keeps an ended job for
-    MinJobAge, 300 s by default), else ''."""
-    for command, pattern in ((["sacct", "-n", "-P", "-X", "-j", job_id, "-o", "State,ExitCode"], r"^(\S+)"),
-                             (["scontrol", "-o", "show", "job", job_id], r"JobState=(\S+)")):
-        try:
-            proc = subprocess.run(command, capture_output=True, text=True, timeout=30)
-        except (OSError, subprocess.TimeoutExpired):
-            continue
-        found = re.search(pattern, proc.stdout.strip()) if proc.returncode == 0 else None
-        if found:
-            return found.group(1)
-    return ""
+@dataclass
+class JobRecord:
+    """What SLURM still knows of an ended job: `source` is 'sacct' (accounting), 'scontrol' (the controller keeps
+    an ended job for MinJobAge, 300 s by default) or '' (neither); sizes in bytes, 0 where unknown."""
+    source: str = ""
+    state: str = ""              # e.g. FAILED, TIMEOUT, OUT_OF_MEMORY, "CANCELLED by 0"
+    exit_code: str = ""          # <exit status>:<signal>
+    elapsed: str = ""            # [D-]HH:MM:SS
+    max_rss_b: int = 0           # largest MaxRSS of the job's steps
+    req_mem_b: int = 0           # memory asked for per node
+
+
+_UNITS = {"": 1, "K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30, "T": 2 ** 40}
+
+
+def _bytes(text: str, default_unit: str) -> int:
+    """sacct's `423272K`, `100M`, `8Gn` (per node; `c`: per CPU, taken as is) in bytes; 0 where empty."""
+    found = re.fullmatch(r"([\d.]+)([KMGT]?)[nc]?", text.strip())
+    return int(float(found.group(1)) * _UNITS[found.group(2) or default_unit]) if found else 0
+
+
+def job_record(job_id: str) -> JobRecord:
+    """The job's end as sacct records it (the job's line and the largest MaxRSS of its steps), else scontrol's."""
+    try:
+        proc = subprocess.run(["sacct", "-n", "-P", "-j", job_id, "-o", "JobID,State,ExitCode,Elapsed,MaxRSS,ReqMem"],
+                              capture_output=True, text=True, timeout=30)
+        rows = [line.split("|") for line in proc.stdout.splitlines() if line.count("|") == 5] \
+            if proc.returncode == 0 else []
+    except (OSError, subprocess.TimeoutExpired):
+        rows = []
+    job = [row for row in rows if row[0] == job_id]
+    if job:
+        _, state, exit_code, elapsed, _, req_mem = job[0]
+        return JobRecord("sacct", state, exit_code, elapsed, max(_bytes(row[4], "K") for row in rows),
+                         _bytes(req_mem, "M"))
+    try:
+        proc = subprocess.run(["scontrol", "-o", "show", "job", job_id], capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.TimeoutExpired):
+        return JobRecord()
+    fields = dict(re.findall(r"(\w+)=(\S*)", proc.stdout)) if proc.returncode == 0 else {}
+    if "JobState" not in fields:
+        return JobRecord()
+    return JobRecord("scontrol", fields["JobState"], fields.get("ExitCode", ""), fields.get("RunTime", ""), 0,
+                     _bytes(fields.get("MinMemoryNode", ""), "M"))
 
 
 def death_cause(job, timeout_min: int, mem_gb: int | None) -> str:
-    """Why a job ended without a result: sacct's state where accounting exists, else what its log says."""
-    state = slurm_state(str(job.job_id))
+    """Why a job ended without a result, and where that was read: sacct's record where accounting exists (a job
+    killed by slurmd's memory polling ends FAILED there, its steps' MaxRSS above ReqMem), scontrol's, and the job's
+    log (time limit, cancellation, memory, the job's own `error:` line)."""
+    record = job_record(str(job.job_id))
     log = ""
     for path in (job.paths.stderr, job.paths.stdout):
         if Path(path).is_file():
             log += Path(path).read_text(errors="replace")[-20000:]
     errors = [line for line in log.splitlines() if line.startswith("error:")]
-    if "TIMEOUT" in state or "DUE TO TIME LIMIT" in log:
-        return f"timed out (time limit {timeout_min} min)"
-    if "OUT_OF_MEMORY" in state or re.search(r"oom[-_ ]kill|Out Of Memory", log, re.IGNORECASE):
-        return f"out of memory (mem_gb={mem_gb})"
-    if "CANCELLED" in state or "CANCELLED" in log:
-        return "cancelled (scancel or an administrator)"
-    if errors:
-        return errors[-1].removeprefix("error:").strip()
-    if state:
-        return f"ended {state.replace('|', ', exit code ')} without a result"
-    return "ended without a result (killed, node failure or out of memory; no accounting here to say which)"
+    over_memory = record.req_mem_b and record.max_rss_b > record.req_mem_b
+    mib = 2 ** 20
+    if "TIMEOUT" in record.state or "DUE TO TIME LIMIT" in log:
+        ran = f", ran {record.elapsed}" if record.elapsed else ""
+        cause = f"timed out (time limit {timeout_min} min{ran})"
+    elif "OUT_OF_MEMORY" in record.state or over_memory or \
+            re.search(r"oom[-_ ]kill|out of memory|exceeded (job )?memory limit", log, re.IGNORECASE):
+        limit = f"{record.req_mem_b / mib:.0f} MiB" if record.req_mem_b else f"mem_gb={mem_gb}"
+        used = f"used {record.max_rss_b / mib:.0f} MiB of {limit}" if over_memory else f"limit {limit}"
+        cause = f"out of memory ({used})"
+    elif "CANCELLED" in record.state or "CANCELLED" in log:
+        by = re.search(r"CANCELLED by (\d+)", record.state)
+        cause = f"cancelled ({f'by uid {by.group(1)}' if by else 'scancel or an administrator'})"
+    elif errors:
+        cause = f"failed: {errors[-1].removeprefix('error:').strip()}"
+    elif record.state:
+        cause = "ended without a result"
+    else:
+        return "ended without a result (killed, node failure or out of memory; no accounting here to say which)"
+    state = f"{record.state}, exit code {record.exit_code}" if record.exit_code else record.state
+    return f"{cause} [{f'{record.source}: {state}' if record.source else 'job log; no accounting'}]"
 
 
 class CheckedSlurmLauncher(SlurmLauncher):

@@ -45,19 +45,63 @@ def test_node_local_paths_are_refused(monkeypatch, tmp_path):
     slurm.check_shared(Path("/tmp/store"), "store.dir")
 
 
+def _dead_job(tmp_path, log: str):
+    (tmp_path / "7_0_log.err").write_text(f"some output\n{log}\n")
+    return SimpleNamespace(job_id="7", paths=SimpleNamespace(stderr=tmp_path / "7_0_log.err",
+                                                             stdout=tmp_path / "7_0_log.out"))
+
+
 @pytest.mark.parametrize("log, cause", [
     ("slurmstepd: error: *** JOB 7 ON n1 CANCELLED AT 2026-11-23T15:00:00 DUE TO TIME LIMIT ***", "timed out"),
     ("slurmstepd: error: Detected 1 oom-kill event(s) in StepId=7.batch", "out of memory"),
+    ("slurmstepd-vm: error: StepId=7.0 exceeded memory limit (433430528 > 104857600), being killed\n"
+     "slurmstepd-vm: error: *** STEP 7.0 ON vm CANCELLED AT 2026-11-23T17:59:41 ***", "out of memory"),
     ("slurmstepd: error: *** JOB 7 ON n1 CANCELLED AT 2026-11-23T15:00:00 ***", "cancelled"),
-    ("error: /data/x/01_plate/30: dataset root does not exist", "/data/x/01_plate/30: dataset root does not exist"),
+    ("error: /data/x/01_plate/30: dataset root does not exist",
+     "failed: /data/x/01_plate/30: dataset root does not exist [job log; no accounting]"),
     ("", "ended without a result"),
 ])
 def test_a_dead_jobs_cause_comes_from_its_log_without_accounting(monkeypatch, tmp_path, log, cause):
-    monkeypatch.setattr(slurm, "slurm_state", lambda job_id: "")        # no sacct, no scontrol record
-    (tmp_path / "7_0_log.err").write_text(f"some output\n{log}\n")
-    job = SimpleNamespace(job_id="7", paths=SimpleNamespace(stderr=tmp_path / "7_0_log.err",
-                                                            stdout=tmp_path / "7_0_log.out"))
-    assert cause in slurm.death_cause(job, timeout_min=15, mem_gb=8)
+    monkeypatch.setattr(slurm, "job_record", lambda job_id: slurm.JobRecord())   # no sacct, no scontrol record
+    assert cause in slurm.death_cause(_dead_job(tmp_path, log), timeout_min=15, mem_gb=8)
+
+
+# sacct -n -P -j <id> -o JobID,State,ExitCode,Elapsed,MaxRSS,ReqMem as Debian's SLURM 22.05 printed it on the
+# single-node cluster of scripts/slurm_single_node.sh --accounting (memory polled by jobacct_gather/linux with
+# OverMemoryKill: the job ends FAILED, its step's MaxRSS above ReqMem)
+SACCT = {
+    "out of memory (used 413 MiB of 100 MiB) [sacct: FAILED, exit code 9:0]":
+        "7|FAILED|9:0|00:00:06||100M\n7.batch|FAILED|9:0|00:00:06|10420K|\n7.0|CANCELLED by 0|0:9|00:00:06|423272K|\n",
+    "timed out (time limit 1 min, ran 00:01:12) [sacct: TIMEOUT, exit code 0:0]":
+        "7|TIMEOUT|0:0|00:01:12||8G\n7.batch|CANCELLED|0:15|00:01:12|10840K|\n7.0|CANCELLED|0:15|00:01:12|1684K|\n",
+    "cancelled (by uid 0) [sacct: CANCELLED by 0, exit code 0:0]": "7|CANCELLED by 0|0:0|00:00:00||8G\n",
+    "failed: mm2fsk needs a 2-frequency configuration [sacct: FAILED, exit code 2:0]":
+        "7|FAILED|2:0|00:00:09||8G\n7.batch|FAILED|2:0|00:00:09|9000K|\n7.0|FAILED|2:0|00:00:08|301000K|\n",
+}
+
+
+@pytest.mark.parametrize("cause", list(SACCT))
+def test_a_dead_jobs_cause_comes_from_sacct(monkeypatch, tmp_path, cause):
+    def fake_run(command, **kwargs):
+        assert command[0] == "sacct", command          # accounting answers: scontrol is not asked
+        return subprocess.CompletedProcess(command, 0, SACCT[cause], "")
+
+    monkeypatch.setattr(slurm.subprocess, "run", fake_run)
+    log = "error: mm2fsk needs a 2-frequency configuration" if cause.startswith("failed") else ""
+    assert slurm.death_cause(_dead_job(tmp_path, log), timeout_min=1, mem_gb=None) == cause
+
+
+def test_a_dead_jobs_cause_from_scontrol_when_sacct_has_none(monkeypatch, tmp_path):
+    """Without accounting sacct fails; the controller still knows the job for MinJobAge (300 s)."""
+    def fake_run(command, **kwargs):
+        if command[0] == "sacct":
+            return subprocess.CompletedProcess(command, 1, "", "sacct: error: Slurm accounting storage is disabled")
+        return subprocess.CompletedProcess(command, 0, "JobId=7 JobName=bench-x JobState=TIMEOUT Reason=TimeLimit "
+                                                       "ExitCode=0:0 RunTime=00:01:12 MinMemoryNode=8G", "")
+
+    monkeypatch.setattr(slurm.subprocess, "run", fake_run)
+    assert slurm.death_cause(_dead_job(tmp_path, ""), timeout_min=1, mem_gb=8) == \
+        "timed out (time limit 1 min, ran 00:01:12) [scontrol: TIMEOUT, exit code 0:0]"
 
 
 def test_a_temp_folder_of_a_live_process_on_another_host_is_a_leftover(tmp_path):
