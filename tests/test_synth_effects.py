@@ -317,3 +317,17 @@ def test_ground_truth_smoothing_rounds_edges_flattens_ripples_and_keeps_flat_fac
         facing = tris[(normals[:, 2] < -0.5) & inner]                     # the front, away from its edges
         amplitudes.append(np.ptp(facing[..., 2]) / 2)
     assert amplitudes[0] == pytest.approx(0.005, abs=2e-4) and amplitudes[0] > amplitudes[1] > amplitudes[2] > 0.002
+
+
+def test_indexed_merges_corners_exactly_as_numpy_unique():
+    """meshes.indexed (pandas group numbers) against np.unique(axis=0) on a random soup with shared corners."""
+    from bench.synth.meshes import indexed
+
+    rng = np.random.default_rng(5)
+    corners = rng.normal(size=(300, 3))
+    corners[:, 0][::7] = corners[0, 0]                      # ties in the first coordinate: the order is by all three
+    tris = corners[rng.integers(0, 300, size=(500, 3))]
+    vertices, triangles = indexed(tris)
+    expected, inverse = np.unique(tris.reshape(-1, 3), axis=0, return_inverse=True)
+    assert np.array_equal(vertices, expected) and np.array_equal(triangles.ravel(), inverse.ravel())
+    assert triangles.dtype == np.int64 and np.array_equal(vertices[triangles], tris)

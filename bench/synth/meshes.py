@@ -120,6 +120,12 @@ def transform(tris_m: np.ndarray, rotation: np.ndarray, translation_m) -> np.nda
 
 
 def indexed(tris_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Merge identical corners: (vertices_m (V, 3), triangles (T, 3) int64)."""
-    vertices, inverse = np.unique(tris_m.reshape(-1, 3), axis=0, return_inverse=True)
+    """Merge identical corners: (vertices_m (V, 3) in lexicographic order, triangles (T, 3) int64), as
+    np.unique(axis=0) would return them (pandas' sorted group numbers: the same result, ~10x faster)."""
+    import pandas as pd
+
+    corners = np.ascontiguousarray(tris_m, dtype=np.float64).reshape(-1, 3)
+    inverse = pd.DataFrame(corners).groupby([0, 1, 2], sort=True).ngroup().to_numpy()
+    vertices = np.empty((int(inverse.max()) + 1 if len(inverse) else 0, 3))
+    vertices[inverse] = corners
     return vertices, inverse.reshape(-1, 3).astype(np.int64)
