@@ -31,7 +31,7 @@ from methods.domain.capture import Capture, RadarGrid
 from methods.domain.errors import DatasetError
 from bench.frames import parse_frame_spec, select_frames
 from bench.grids import grid_for
-from bench.results import write_depth, write_results
+from bench.results import ResultsCsv, write_depth
 from bench.store import Store, capture_files, code_version, write_arrays
 from bench.sweepinfo import sweep_jobs, timing_mode
 from metrics.evaluate import GroundTruth, evaluate, ground_truth, no_ground_truth_scores
@@ -296,7 +296,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                             else cfg.dataset.frame)
     empty_filtered, parts = bool(cfg.dataset.empty_filtered), _parts(cfg.prior.name)
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows = []
+    rows, results_csv = [], ResultsCsv(out_dir / "results.csv")
     for capture_dir, frame in ((d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)):
         key = hit = None
         if store is not None:
@@ -326,9 +326,9 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
         write_depth(out_dir, stem, arrays["depth_m"], grid)
         write_arrays(out_dir / "arrays.h5", stem, arrays, {**_grid_attrs(grid), "key": key or ""})
         rows.append({**row, "cached": hit is not None})
+        results_csv.add(rows[-1])     # appended after every capture: an interruption loses no row
         log.info("%s/%s: %s, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],
                  "cached" if hit else "computed", row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
-        write_results(out_dir / "results.csv", rows)   # after every capture: an interruption loses no row
     return rows
 
 

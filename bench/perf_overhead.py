@@ -38,7 +38,7 @@ def timed_stages(spent: dict):
                (app, "capture_files", "store_key"), (store.Store, "capture_digest", "store_key"),
                (methods, "reconstruct", "method"), (app, "resample_depth_m", "metrics"),
                (app, "evaluate", "metrics"), (app, "resample_nearest", "metrics"), (app, "write_depth", "outputs"),
-               (app, "write_arrays", "outputs"), (app, "write_results", "outputs")]
+               (app, "write_arrays", "outputs"), (app.ResultsCsv, "add", "outputs")]
     originals = [(owner, name, getattr(owner, name)) for owner, name, _ in targets]
 
     def wrap(function, stage):

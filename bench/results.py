@@ -65,3 +65,32 @@ def write_results(path: Path, rows: list[dict]) -> pd.DataFrame:
     table.to_csv(tmp, index=False)
     os.replace(tmp, path)
     return table
+
+
+class ResultsCsv:
+    """`results.csv` growing by one appended line per row as a run finishes captures, so a sequence of N frames
+    costs O(N) (rewriting the whole table after every frame cost O(N^2)) and an interruption loses no finished row.
+
+    The file is (re)written whole, atomically (`write_results`), only for the first row and when a row brings a
+    column the header lacks (columns in `write_results`' order); every other row is one `write` of one line in the
+    header's column order (missing values empty), which a killed process either made or did not: the file always
+    parses. Values are formatted by pandas as in `write_results` (an integer column holding empty cells is written
+    '12' here, '12.0' there: the same number read back).
+    """
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.rows: list[dict] = []
+        self.columns: list[str] | None = None
+
+    def add(self, row: dict) -> None:
+        self.rows.append(row)
+        if self.columns is None or not row.keys() <= set(self.columns):
+            self.columns = list(write_results(self.path, self.rows).columns)
+            return
+        line = pd.DataFrame([row], columns=self.columns).to_csv(header=False, index=False).encode()
+        descriptor = os.open(self.path, os.O_WRONLY | os.O_APPEND)
+        try:
+            os.write(descriptor, line)
+        finally:
+            os.close(descriptor)
