@@ -1,7 +1,7 @@
 """Whole-frame timings of each method through `methods.reconstruct`: what a user pays for a frame it has not seen.
 
 `python -m bench.perf_frames [--device cpu|cuda|warp-cpu] [--scene masked|plate] [--root DIR] [--repeat N]
-[--bp-nz N] [--out DIR]` (also run by `python -m bench.perf`).
+[--bp-nz N] [--fill delaunay|scanline ...] [--out DIR]` (also run by `python -m bench.perf`).
 
 Scenes, built in memory (no file I/O, no Open3D), at the paper's sizes (94x94x128 frame, 301x301 pixels, a
 640x480 depth camera):
@@ -15,7 +15,8 @@ Every call gets new data (`new` columns): the radar samples rotated by a random 
 by 1 mm (new arrays, so no cache can hit), as a camera delivers frames; the `repeated` columns time the same
 frame object again, interleaved call by call with the new ones. Median and 90th percentile of `--repeat` calls
 after one untimed warm-up per scene (compilation): `total` is the methods' own warm time (`timings_ms['total']`),
-`wall` the whole `reconstruct` call; per-stage medians of the new frames. BP runs on 301x301 pixels with
+`wall` the whole `reconstruct` call; per-stage medians of the new frames. Cases with a sensor prior run once per
+`--fill` (the prior's hole fill, methods.prior; default: the default fill). BP runs on 301x301 pixels with
 `--bp-nz` depth samples (201 = the paper's grid; fewer on the CPU, scaled to 201). Writes
 OUT/perf_frames_<device>.csv, OUT being `--out` (default outputs/perf/; `--out results` for the committed figures).
 """
@@ -35,6 +36,8 @@ from bench.antennas import load_antenna_array
 from methods.domain.capture import CameraIntrinsics, Capture, DepthFrame, Metadata, RadarFrame, RadarGrid
 from methods import reconstruct
 from methods.correlate import C_M_PER_S
+from methods.method import SENSOR_PRIORS
+from methods.prior import DEFAULT_FILL, FILLS
 
 FREQS_HZ = np.linspace(72e9, 82e9, 128)
 DEFAULT_OUT = Path("outputs/perf")      # the benchmarks' CSVs (bench.perf, .perf_frames, .perf_sweep); not tracked
@@ -203,13 +206,15 @@ def _percentile(values: list[float], q: float) -> float:
 
 
 def time_case(captures: list[Capture], method: str, freq: str, prior: str, device: str, repeat: int, bp_nz: int,
-              seed: int = 0) -> dict:
-    """Median / p90 of `repeat` new-frame and repeated-frame calls (interleaved), captures cycled; stage medians."""
+              seed: int = 0, fill: str = DEFAULT_FILL) -> dict:
+    """Median / p90 of `repeat` new-frame and repeated-frame calls (interleaved), captures cycled; stage medians.
+    `fill`: the sensor prior's hole fill."""
     rng = np.random.default_rng(seed)
+    options = {"fill": fill} if prior in SENSOR_PRIORS else {}
     grids = [_bp_grid(c.radar.grid, bp_nz) if method == "bp" else c.radar.grid for c in captures]
     scale = captures[0].radar.grid.size[2] / grids[0].size[2] if method == "bp" else 1.0
     for capture, grid in zip(captures, grids):                      # warm-up: compilation, first-touch pages
-        reconstruct(capture, method, freq, prior=prior, device=device, grid=grid)
+        reconstruct(capture, method, freq, prior=prior, device=device, grid=grid, prior_options=options)
     runs = {"new": [], "repeated": []}
     valid = []
     for i in range(repeat):
@@ -217,13 +222,14 @@ def time_case(captures: list[Capture], method: str, freq: str, prior: str, devic
         for mode in ("new", "repeated"):
             capture = new_frame(captures[j], rng) if mode == "new" else captures[j]
             start = time.perf_counter()
-            result = reconstruct(capture, method, freq, prior=prior, device=device, grid=grids[j])
+            result = reconstruct(capture, method, freq, prior=prior, device=device, grid=grids[j],
+                                 prior_options=options)
             wall_ms = (time.perf_counter() - start) * 1e3
             runs[mode].append({**result.timings_ms, "wall": wall_ms})
             if mode == "new":
                 valid.append(int(result.valid.sum()))
             del result, capture                 # holding results would time fresh host pages, not a frame
-    row = {"method": method, "freq": freq, "prior": prior, "device": device,
+    row = {"method": method, "freq": freq, "prior": prior, "fill": options.get("fill", ""), "device": device,
            "scene": "+".join(dict.fromkeys(c.object_name for c in captures)), "calls": repeat,
            "pixels": grids[0].size[0] * grids[0].size[1], "nz": grids[0].size[2] if method == "bp" else 1,
            "scaled_to_nz": f"x{scale:.0f}" if scale > 1 else "", "valid_px": int(statistics.median(valid))}
@@ -236,7 +242,7 @@ def time_case(captures: list[Capture], method: str, freq: str, prior: str, devic
     row.update({f"new_{s}_ms": statistics.median(r.get(s, 0.0) for r in runs["new"]) * scale for s in stages})
     row["load_1min"] = os.getloadavg()[0]
     detail = "  ".join(f"{s} {row[f'new_{s}_ms']:.1f}" for s in stages)
-    print(f"frame {method:6s} {freq:8s} {prior:9s} new {row['new_total_median_ms']:9.1f} ms (p90 "
+    print(f"frame {method:6s} {freq:8s} {prior:9s} {row['fill']:8s} new {row['new_total_median_ms']:9.1f} ms (p90 "
           f"{row['new_total_p90_ms']:9.1f})  repeated {row['repeated_total_median_ms']:9.1f} ms "
           f"{row['scaled_to_nz']:5s} ({detail})  load {row['load_1min']:.1f}", flush=True)
     return row
@@ -250,10 +256,12 @@ def scene_captures(scene: str, root: Path | None = None) -> list[Capture]:
 
 
 def run_frames(device: str, repeat: int, bp_nz: int, scene: str = "masked", root: Path | None = None,
-               cases=CASES) -> list[dict]:
-    """One row per case (method, freq, prior) of new-frame and repeated-frame timings on `scene`'s captures."""
+               cases=CASES, fills=(DEFAULT_FILL,)) -> list[dict]:
+    """One row per case (method, freq, prior) and, with a sensor prior, per fill of new-frame and repeated-frame
+    timings on `scene`'s captures."""
     captures = scene_captures(scene, root)
-    return [time_case(captures, method, freq, prior, device, repeat, bp_nz) for method, freq, prior in cases]
+    return [time_case(captures, method, freq, prior, device, repeat, bp_nz, fill=fill)
+            for method, freq, prior in cases for fill in (fills if prior in SENSOR_PRIORS else fills[:1])]
 
 
 def write_rows(rows: list[dict], path: Path, columns: list[str] | None = None, digits: int = 4) -> None:
@@ -286,6 +294,8 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=cli.positive_int, default=9)
     parser.add_argument("--bp-nz", type=cli.positive_int, default=None,
                         help="BP depth samples run (default: 201 on CUDA, 2 on CPU)")
+    parser.add_argument("--fill", nargs="+", default=[DEFAULT_FILL], choices=list(FILLS),
+                        help="the sensor prior's hole fill(s) (default: %(default)s)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
                         help="folder for the CSV (default: outputs/perf; `--out results` for the committed figures)")
     args = parser.parse_args(argv)
@@ -294,7 +304,8 @@ def main(argv=None) -> int:
     bp_nz = args.bp_nz or (201 if device == "cuda" else 2)
     root = None if args.root is None else cli.existing_path(args.root, "dir", "--root")
     cases = CASES if args.cases is None else [_case(text) for text in args.cases]
-    write_rows(run_frames(device, args.repeat, bp_nz, args.scene, root, cases), out / f"perf_frames_{device}.csv")
+    write_rows(run_frames(device, args.repeat, bp_nz, args.scene, root, cases, tuple(args.fill)),
+               out / f"perf_frames_{device}.csv")
     return 0
 
 

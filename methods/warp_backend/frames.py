@@ -1,15 +1,31 @@
 """What a Warp backend keeps on its device between calls: one frame's inputs in each kernel's layout (cached by
-content) and a pool of reusable work buffers."""
+content), what depends on the antennas or the frequencies only (kept across frames), and a pool of reusable work
+buffers. On CUDA a new frame uploads its raw samples once and builds the tensor-core tables on the device
+(`table_kernels`); Warp-CPU builds them on the host (the reference the tests compare with)."""
 from __future__ import annotations
+
+from functools import cached_property
 
 import numpy as np
 import warp as wp
 
 from methods import range_compression
-from methods.warp_backend.correlation_kernels import MAX_ANTENNAS, TC2_HALF, TC2_PAD, TC_ANT, TX_CHUNK
+from methods.warp_backend import table_kernels
+from methods.warp_backend.correlation_kernels import MAX_ANTENNAS, TC2_HALF, TC2_KP, TC2_PAD, TC_ANT, TX_CHUNK
 
 C_M_PER_S = 299_792_458.0
 FRAME_CACHE_SIZE = 4
+CONSTANTS_KEPT = 16            # antenna / frequency layouts kept (a sweep uses one array and a few configurations)
+_CONSTANTS: dict = {}
+
+
+def _constant(key, build):
+    """The arrays `build()` made for `key` (device, kind and the exact bytes they derive from), built once."""
+    if key not in _CONSTANTS:
+        _CONSTANTS[key] = build()
+        while len(_CONSTANTS) > CONSTANTS_KEPT:
+            _CONSTANTS.pop(next(iter(_CONSTANTS)))
+    return _CONSTANTS[key]
 
 
 def vec2_of(a: np.ndarray) -> np.ndarray:
@@ -34,14 +50,29 @@ class FrameInputs:
             raise ValueError(f"Warp kernels hold at most {MAX_ANTENNAS} antennas per side")
         self.device = wp_device
         self.freqs_hz, self.tx_m, self.rx_m = freqs_hz, tx_m, rx_m
-        scale = 1.0 / (len(rx_m) * len(tx_m))
-        self.sig = np.ascontiguousarray(np.moveaxis(signal, 2, 0)) * scale       # (F, R, T) complex
+        self.raw = signal                                                      # (R, T, F) complex64, host
+        self.scale = 1.0 / (len(rx_m) * len(tx_m))
         self.n_freqs = len(freqs_hz)
-        self.tx = wp.array(tx_m.astype(np.float32), dtype=wp.vec3f, device=self.device)
-        self.rx = wp.array(rx_m.astype(np.float32), dtype=wp.vec3f, device=self.device)
-        self.k = wp.array((2 * np.pi * freqs_hz / C_M_PER_S).astype(np.float32), dtype=wp.float32, device=self.device)
-        self.cycles = wp.array(2.0 * freqs_hz / C_M_PER_S, dtype=wp.float64, device=self.device)
+        self._antenna_key = (wp_device, tx_m.tobytes(), rx_m.tobytes())
+        self.tx, self.rx = _constant(self._antenna_key + ("vec3",), lambda: (
+            wp.array(tx_m.astype(np.float32), dtype=wp.vec3f, device=wp_device),
+            wp.array(rx_m.astype(np.float32), dtype=wp.vec3f, device=wp_device)))
+        self.k, self.cycles = _constant((wp_device, "freqs", np.asarray(freqs_hz).tobytes()), lambda: (
+            wp.array((2 * np.pi * freqs_hz / C_M_PER_S).astype(np.float32), dtype=wp.float32, device=wp_device),
+            wp.array(2.0 * freqs_hz / C_M_PER_S, dtype=wp.float64, device=wp_device)))
         self._layouts = {}
+
+    @cached_property
+    def sig(self) -> np.ndarray:
+        """(F, R, T) normalised samples on the host (the layouts built on the host start from it)."""
+        return np.ascontiguousarray(np.moveaxis(self.raw, 2, 0)) * self.scale
+
+    @property
+    def raw_device(self) -> wp.array:
+        """The raw frame (R, T, F) vec2f on the device: one upload."""
+        return self._get("raw", lambda: wp.array(
+            np.ascontiguousarray(self.raw, dtype=np.complex64).view(np.float32).reshape(*self.raw.shape, 2),
+            dtype=wp.vec2f, device=self.device))
 
     def _get(self, name, build):
         if name not in self._layouts:
@@ -64,7 +95,7 @@ class FrameInputs:
 
     @property
     def tx_padded(self):
-        return self._get("tx_padded", lambda: wp.array(
+        return _constant(self._antenna_key + ("tx_padded",), lambda: wp.array(
             np.pad(self.tx_m, ((0, self.n_tx_pad), (0, 0)), mode="edge").astype(np.float32), dtype=wp.vec3f,
             device=self.device))
 
@@ -97,32 +128,50 @@ class FrameInputs:
 
     def tile_tables(self, with_mat: bool = True):
         """(rx4, tx4, gain, mat): padded antennas, per-frequency gain and fp16 [[Sr, Si], [-Si, Sr]] / gain; `mat`
-        (F, 192, 192) is uploaded only `with_mat` (Warp-CPU's kernel; CUDA's reads `tx_half_tables`), else None."""
+        (F, 192, 192) is built (on the host) only `with_mat` (Warp-CPU's kernel), else None and the gain is the
+        one `tx_half_tables` builds on the device (CUDA)."""
+        n = int(TC_ANT)
+        rx4, tx4 = _constant(self._antenna_key + ("tc",), lambda: (
+            wp.array(antennas4(self.rx_m, n), dtype=wp.vec4f, device=self.device),
+            wp.array(antennas4(self.tx_m, n), dtype=wp.vec4f, device=self.device)))
+        if not with_mat:
+            return rx4, tx4, self._device_tables()[0], None
+        gain = self._get("tc_gain", lambda: wp.array(self._host_mat()[0].astype(np.float32), dtype=wp.float32,
+                                                     device=self.device))
+        mat = self._get("tc_mat", lambda: wp.array(np.ascontiguousarray(self._host_mat()[1]), dtype=wp.float16,
+                                                   device=self.device))
+        return rx4, tx4, gain, mat
+
+    def host_tx_half_tables(self) -> np.ndarray:
+        """(F, 2, 96, TC2_KP) fp16 on the host: per Tx half h the rows [M[:, h*48 + j] ; M[:, 96 + h*48 + j]] of
+        M^T, with TC2_PAD zero columns appended (the specification of `table_kernels.tx_half_table`)."""
+        mat = self._host_mat()[1]                                             # (F, 192, 192)
+        n, hh = int(TC_ANT), int(TC2_HALF)
+        halves = [np.concatenate([mat[:, :, h * hh:(h + 1) * hh], mat[:, :, n + h * hh:n + (h + 1) * hh]],
+                                 axis=2).transpose(0, 2, 1) for h in range(2)]
+        m = np.stack(halves, axis=1)
+        return np.ascontiguousarray(np.concatenate([m, np.zeros(m.shape[:3] + (int(TC2_PAD),), dtype=np.float16)],
+                                                   axis=3))
+
+    def _device_tables(self):
+        """(gain (F,) float32, M_h^T (F, 2, 96, TC2_KP) fp16) built on the device from the raw frame (three
+        launches, no host work but the upload of the raw samples)."""
         def build():
-            n = int(TC_ANT)
             dev = self.device
-            return (wp.array(antennas4(self.rx_m, n), dtype=wp.vec4f, device=dev),
-                    wp.array(antennas4(self.tx_m, n), dtype=wp.vec4f, device=dev),
-                    wp.array(self._host_mat()[0].astype(np.float32), dtype=wp.float32, device=dev))
-        mat = None
-        if with_mat:
-            mat = self._get("tc_mat", lambda: wp.array(np.ascontiguousarray(self._host_mat()[1]), dtype=wp.float16,
-                                                       device=self.device))
-        return (*self._get("tc", build), mat)
+            raw = self.raw_device
+            gain_raw = wp.zeros(self.n_freqs, dtype=wp.float32, device=dev)
+            gain = wp.empty(self.n_freqs, dtype=wp.float32, device=dev)
+            mat_h = wp.empty((self.n_freqs, 2, int(TC_ANT), int(TC2_KP)), dtype=wp.float16, device=dev)
+            scale = wp.float32(self.scale)
+            wp.launch(table_kernels.signal_gain, dim=raw.shape, inputs=[raw, scale, gain_raw], device=dev)
+            wp.launch(table_kernels.tx_half_table, dim=mat_h.shape, inputs=[raw, scale, gain_raw, gain, mat_h],
+                      device=dev)
+            return gain, mat_h
+        return self._get("device_tables", build)
 
     def tx_half_tables(self):
-        """(F, 2, 96, TC2_KP) fp16: per Tx half h the rows [M[:, h*48 + j] ; M[:, 96 + h*48 + j]] of M^T, with
-        TC2_PAD zero columns appended (the operand of `correlate_tiles_tx_halves`), from the host matrix (no
-        copy back of the device one)."""
-        def build():
-            mat = self._host_mat()[1]                                         # (F, 192, 192)
-            n, hh = int(TC_ANT), int(TC2_HALF)
-            halves = [np.concatenate([mat[:, :, h * hh:(h + 1) * hh], mat[:, :, n + h * hh:n + (h + 1) * hh]],
-                                     axis=2).transpose(0, 2, 1) for h in range(2)]
-            m = np.stack(halves, axis=1)
-            m = np.concatenate([m, np.zeros(m.shape[:3] + (int(TC2_PAD),), dtype=np.float16)], axis=3)
-            return wp.array(np.ascontiguousarray(m), dtype=wp.float16, device=self.device)
-        return self._get("tc2", build)
+        """The operand M_h^T of `correlate_tiles_tx_halves` (see `host_tx_half_tables`), built on the device."""
+        return self._device_tables()[1]
 
 
 class FrameCache:
