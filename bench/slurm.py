@@ -123,7 +123,8 @@ _UNITS = {"": 1, "K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30, "T": 2 ** 40}
 
 
 def _bytes(text: str, default_unit: str) -> int:
-    """sacct's `423272K`, `100M`, `8Gn` (per node; `c`: per CPU, taken as is) in bytes; 0 where empty."""
+    """sacct's `423272K`, `200M` (SLURM 22.05's ReqMem: per node, also for --mem-per-cpu; older ones append n/c)
+    in bytes; 0 where empty."""
     found = re.fullmatch(r"([\d.]+)([KMGT]?)[nc]?", text.strip())
     return int(float(found.group(1)) * _UNITS[found.group(2) or default_unit]) if found else 0
 
@@ -149,8 +150,9 @@ def job_record(job_id: str) -> JobRecord:
     fields = dict(re.findall(r"(\w+)=(\S*)", proc.stdout)) if proc.returncode == 0 else {}
     if "JobState" not in fields:
         return JobRecord()
+    mem = re.search(r"(?:^|,)mem=([^,]+)", fields.get("TRES", ""))   # per node, also for --mem-per-cpu
     return JobRecord("scontrol", fields["JobState"], fields.get("ExitCode", ""), fields.get("RunTime", ""), 0,
-                     _bytes(fields.get("MinMemoryNode", ""), "M"))
+                     _bytes(mem.group(1) if mem else "", "M"))
 
 
 def death_cause(job, timeout_min: int, mem_gb: int | None) -> str:

@@ -97,7 +97,7 @@ def test_a_dead_jobs_cause_from_scontrol_when_sacct_has_none(monkeypatch, tmp_pa
         if command[0] == "sacct":
             return subprocess.CompletedProcess(command, 1, "", "sacct: error: Slurm accounting storage is disabled")
         return subprocess.CompletedProcess(command, 0, "JobId=7 JobName=bench-x JobState=TIMEOUT Reason=TimeLimit "
-                                                       "ExitCode=0:0 RunTime=00:01:12 MinMemoryNode=8G", "")
+                                                       "ExitCode=0:0 RunTime=00:01:12 MinMemoryCPU=100M TRES=cpu=2,mem=200M,node=1", "")
 
     monkeypatch.setattr(slurm.subprocess, "run", fake_run)
     assert slurm.death_cause(_dead_job(tmp_path, ""), timeout_min=1, mem_gb=8) == \
@@ -116,22 +116,37 @@ def test_a_temp_folder_of_a_live_process_on_another_host_is_a_leftover(tmp_path)
     assert [r.status for r in results] == ["generated"] and not stale.exists()
 
 
-def _slurm_try_skip_reason() -> str | None:
+def _slurm_try_skip_reason(accounting: bool) -> str | None:
     if os.environ.get("BENCH_SLURM_TRY") != "1":
-        return ("opt-in (about 2-15 min: starts SLURM daemons, runs four sweeps): BENCH_SLURM_TRY=1 as root on "
-                "Debian/Ubuntu with slurmctld, slurmd and munge installable")
+        return ("opt-in (about 5-10 min per mode: starts SLURM daemons, runs seven small sweeps): BENCH_SLURM_TRY=1 as "
+                "root on Debian/Ubuntu with slurmctld, slurmd and munge installable"
+                + (", and slurmdbd and mariadb-server for accounting" if accounting else ""))
     if os.geteuid() != 0:
         return "starting slurmctld/slurmd needs root"
-    if shutil.which("apt-get") is None and shutil.which("slurmctld") is None:
-        return "no slurmctld and no apt-get to install it"
+    needed = ["slurmctld"] + (["slurmdbd", "mariadbd"] if accounting else [])
+    if shutil.which("apt-get") is None and any(shutil.which(daemon) is None for daemon in needed):
+        return f"no apt-get to install {' and '.join(needed)}"
     return None
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(_slurm_try_skip_reason() is not None, reason=_slurm_try_skip_reason() or "")
-def test_the_slurm_path_on_a_single_node_cluster(tmp_path):
-    out = REPO / "outputs" / "slurm-try-test"
-    proc = subprocess.run(["bash", str(REPO / "scripts" / "slurm_try.sh"), str(out)], capture_output=True, text=True,
-                          timeout=3600)
+@pytest.mark.parametrize("accounting", [
+    pytest.param(False, marks=pytest.mark.skipif(_slurm_try_skip_reason(False) is not None,
+                                                 reason=_slurm_try_skip_reason(False) or "")),
+    pytest.param(True, marks=pytest.mark.skipif(_slurm_try_skip_reason(True) is not None,
+                                                reason=_slurm_try_skip_reason(True) or ""))],
+    ids=["no-accounting", "accounting"])
+def test_the_slurm_path_on_a_single_node_cluster(accounting):
+    """scripts/slurm_try.sh: sweep, re-run from the store, a cancelled job resumed, a job failing with its own
+    error, jobs killed for memory, a job timing out; each cause read from sacct with accounting, else from scontrol
+    or the job's log. The daemons are stopped afterwards (their jobs' CPU load counts against everyone's timings)."""
+    out = REPO / "outputs" / f"slurm-try-test-{'accounting' if accounting else 'none'}"
+    try:
+        proc = subprocess.run(["bash", str(REPO / "scripts" / "slurm_try.sh"),
+                               *(["--accounting"] if accounting else []), str(out)],
+                              capture_output=True, text=True, timeout=3600)
+    finally:
+        subprocess.run(["bash", str(REPO / "scripts" / "slurm_single_node.sh"), "stop"], capture_output=True,
+                       timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert proc.stdout.count("ok: ") == 6
+    assert proc.stdout.count("ok: ") == 15, proc.stdout
