@@ -31,6 +31,7 @@ from methods.domain.capture import Capture, RadarGrid
 from methods.domain.errors import DatasetError
 from bench.frames import parse_frame_spec, select_frames
 from bench.grids import grid_for
+from bench.progress import each
 from bench.results import ResultsCsv, write_depth
 from bench.store import Store, capture_files, code_version, write_arrays
 from bench.sweepinfo import sweep_jobs, timing_mode
@@ -297,13 +298,15 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     empty_filtered, parts = bool(cfg.dataset.empty_filtered), _parts(cfg.prior.name)
     out_dir.mkdir(parents=True, exist_ok=True)
     rows, results_csv = [], ResultsCsv(out_dir / "results.csv")
-    for capture_dir, frame in ((d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)):
+    todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
+    # a bar per job only when it runs alone: jobs side by side on one terminal would draw over each other
+    for capture_dir, frame in each(todo, f"{method.label} {cfg.freq.name}", unit="frame", enabled=timing == "alone"):
         key = hit = None
         if store is not None:
             files = capture_files(capture_dir, frame, parts, empty_filtered) + [Path(f) for f in _antenna_files(cfg)
                                                                                 if f is not None]
             key = store.key({**cell, "frame": frame, "capture": store.capture_digest(files)})
-            hit = store.get(key)
+            hit = store.get(key, names=("depth_m",))     # the depth PNG's; arrays.h5 gets copies (below)
             if hit is not None and timing == "alone" and hit[0].get("timing") != "alone":
                 hit = None           # its runtime was measured beside other jobs (or not recorded): re-measure
         if hit is None:
@@ -324,7 +327,11 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
             grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]), tuple(map(int, attrs["grid_size"])))
         stem = f"{row['object']}_{row['distance']}_{row['frame']:06d}"
         write_depth(out_dir, stem, arrays["depth_m"], grid)
-        write_arrays(out_dir / "arrays.h5", stem, arrays, {**_grid_attrs(grid), "key": key or ""})
+        array_attrs = {**_grid_attrs(grid), "key": key or ""}
+        if store is not None:      # compressed once, into the store
+            store.copy_arrays(key, out_dir / "arrays.h5", stem, array_attrs)
+        else:
+            write_arrays(out_dir / "arrays.h5", stem, arrays, array_attrs)
         rows.append({**row, "cached": hit is not None})
         results_csv.add(rows[-1])     # appended after every capture: an interruption loses no row
         log.info("%s/%s: %s, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],

@@ -7,7 +7,8 @@ set-up is not included: time `python -m bench -m experiment=table3 ... hydra/lau
 stages are timed where it calls them: reading captures (`maroon.read_capture`: each capture is read once per
 frame and parts, then served from the app's cache), the ground truth (`metrics.evaluate.ground_truth`: once per
 capture, grid and object pose), the store's file list and digests, `methods.reconstruct` (its wall time and its
-own warm `total`), resampling and metrics, and the output files (depth PNG + JSON, arrays.h5, results.csv).
+own warm `total`), resampling and metrics, the store's reads and writes of finished cells (`store`), and the output
+files (depth PNG + JSON + preview, arrays.h5, results.csv).
 `other` is the cell's wall time minus all of these. Without --store the result store is off (every cell
 computes). One row per cell and a `total` row: OUT/perf_overhead_<device>.csv (OUT = `--out`, default
 outputs/perf/).
@@ -25,7 +26,7 @@ from bench import cli
 from bench.perf_frames import DEFAULT_OUT, write_rows
 from bench.perf_sweep import table3_cells
 
-STAGES = ("read", "ground_truth", "store_key", "method", "metrics", "outputs")
+STAGES = ("read", "ground_truth", "store_key", "store", "method", "metrics", "outputs")
 
 
 @contextlib.contextmanager
@@ -36,6 +37,7 @@ def timed_stages(spent: dict):
 
     targets = [(maroon, "read_capture", "read"), (app, "ground_truth", "ground_truth"),
                (app, "capture_files", "store_key"), (store.Store, "capture_digest", "store_key"),
+               (store.Store, "get", "store"), (store.Store, "put", "store"), (store.Store, "copy_arrays", "outputs"),
                (methods, "reconstruct", "method"), (app, "resample_depth_m", "metrics"),
                (app, "evaluate", "metrics"), (app, "resample_nearest", "metrics"), (app, "write_depth", "outputs"),
                (app, "write_arrays", "outputs"), (app.ResultsCsv, "add", "outputs")]

@@ -1,6 +1,7 @@
 """What one run writes: rows of results.csv and the per-capture depth PNG + JSON (DESIGN.md section 3)."""
 from __future__ import annotations
 
+import functools
 import json
 import os
 from pathlib import Path
@@ -22,19 +23,43 @@ def depth_to_png_mm(depth_m: np.ndarray) -> np.ndarray:
     return depth_mm.astype(np.uint16)
 
 
+PREVIEW_COLORMAP, NO_DEPTH_GREY = "viridis", "#9a9a9a"
+
+
+@functools.cache
+def _preview_colours() -> tuple[np.ndarray, np.ndarray]:
+    """The preview colour map as a table: (N, 3) uint8 RGB of its N entries, and the grey of 'no depth'."""
+    from matplotlib import colormaps       # not pyplot: a run pays ~0.5 s for the colour map only
+
+    cmap = colormaps[PREVIEW_COLORMAP].with_extremes(bad=NO_DEPTH_GREY)
+    return cmap(np.arange(cmap.N), bytes=True)[:, :3], cmap(np.nan, bytes=True)[:3]
+
+
+def preview_rgb(scaled: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 colours of values in [0, 1] (NaN = no depth), picked from the colour map's table as
+    matplotlib's `Colormap.__call__` picks them (entry floor(x N), x = 1 the last), without its masked-array
+    passes (~20 ms per 301 x 301 image on the 2-core machine)."""
+    table, grey = _preview_colours()
+    index = scaled * len(table)
+    bad = np.isnan(index)
+    index[bad] = 0
+    index[index == len(table)] = len(table) - 1
+    rgb = table[index.astype(np.intp)]
+    rgb[bad] = grey
+    return rgb
+
+
 def write_depth_preview(path: Path, depth_m: np.ndarray) -> tuple[float, float]:
     """A colour-mapped 8-bit view of a depth map for image viewers (the 16-bit PNG shows as black there):
     viridis from the 1st to the 99th percentile of the valid depths, grey where there is no depth. Returns that
     range in metres."""
-    from matplotlib import colormaps       # not pyplot: a run pays ~0.5 s for the colour map only
     from PIL import Image
 
     valid = depth_m[np.isfinite(depth_m)]
     low_m, high_m = (float(np.percentile(valid, 1)), float(np.percentile(valid, 99))) if valid.size else (0.0, 1.0)
     scaled = np.clip((depth_m - low_m) / max(high_m - low_m, 1e-6), 0.0, 1.0)
-    rgba = colormaps["viridis"].with_extremes(bad="#9a9a9a")(np.ma.masked_invalid(scaled), bytes=True)
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(rgba[..., :3]).save(path)
+    Image.fromarray(preview_rgb(scaled)).save(path)
     return low_m, high_m
 
 
