@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-GENERATOR_VERSION = "6"          # bump when the generator's output changes for an unchanged config
+GENERATOR_VERSION = "7"          # bump when the generator's output changes for an unchanged config
 C_M_PER_S = 299_792_458.0
 F_LOW_GHZ, F_HIGH_GHZ = 72.0, 82.0
 QUARTER_WAVELENGTH_M = C_M_PER_S / (F_HIGH_GHZ * 1e9) / 4.0   # 0.914 mm at 82 GHz
@@ -66,6 +66,7 @@ class SynthConfig:
     scattering: str = "cosine"               # "cosine": area * cos^q law; "specular": lobe around the mirror direction
     element_exponent: float = 0.0            # element pattern cos(theta)^q (amplitude, per antenna, off the +z axis)
     transmission: bool = False               # back walls of partly transmissive parts (plastic shells) scatter too
+    multipath: bool = False                  # second-order echoes (object parts, object and mount); opt-in: cost
     channel_amplitude_db: float = 0.0        # per-channel (tx and rx) calibration residual, std of the gain in dB
     channel_phase_deg: float = 0.0           # ... and of the phase in degrees
     clutter_model: str = "points"            # "points": today's point clutter; "scene": wall image + the object's mount

@@ -22,7 +22,7 @@ PARTIAL_SUMS = 2        # blocks alternate between two sums, one thread each: fi
                         # the machine (the order of float32 additions is always the same)
 
 
-def _exact_phasors(path_m: np.ndarray, freq_hz: float) -> np.ndarray:
+def exact_phasors(path_m: np.ndarray, freq_hz: float) -> np.ndarray:
     """exp(-j 2 pi f path / c) as complex64: phase reduced modulo one cycle in float64, then float32 cos/sin."""
     cycles = path_m * (freq_hz / C_M_PER_S)
     cycles -= np.rint(cycles)
@@ -102,10 +102,10 @@ def _accumulate(out: np.ndarray, points_m: np.ndarray, amplitudes: np.ndarray, r
         normals, lobe_rad = lobe if lobe is not None else (None, None)
         weight *= leg_gains(points_m, antennas_m, normals, lobe_rad, element_exponent).astype(np.float32)
     weight[:, :n_rx] *= amplitudes[:, None].astype(np.complex64)
-    step = _exact_phasors(dist_m, steps_hz[0]) if equidistant else None
+    step = exact_phasors(dist_m, steps_hz[0]) if equidistant else None
     for n, freq_hz in enumerate(freqs_hz):
         if n % reseed == 0:
-            phasor = _exact_phasors(dist_m, freq_hz)
+            phasor = exact_phasors(dist_m, freq_hz)
             phasor *= weight
         else:
             phasor *= step

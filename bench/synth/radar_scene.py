@@ -11,6 +11,7 @@ from typing import Iterator
 import numpy as np
 
 from bench.antennas import load_antenna_array
+from bench.synth import multipath
 from bench.synth.config import SynthConfig, frequencies_hz
 from bench.synth.materials import MATERIALS
 from bench.synth.radar_model import (channel_gains, clutter_frame, leg_gains, material_amplitudes, noise_frame,
@@ -54,7 +55,7 @@ def _simulate(samples: SurfaceSamples, amplitudes: np.ndarray, points_m: np.ndar
 def object_frame(scene: Scene, config: SynthConfig, antennas, freqs, rng) -> np.ndarray:
     """The echo of every part of the scene (mount included), complex64 (n_rx, n_tx, F), model units."""
     realistic = (config.radar_materials or config.scattering != "cosine" or config.element_exponent
-                 or config.transmission)
+                 or config.transmission or config.multipath)
     if not realistic:
         return _ideal_object(scene, config, antennas, freqs, rng)
     materials = [MATERIALS[p.material] for p in scene.parts]
@@ -69,6 +70,11 @@ def object_frame(scene: Scene, config: SynthConfig, antennas, freqs, rng) -> np.
     front = visible_samples(part_tris, config.sample_spacing_m)
     frame = _simulate(front, material_amplitudes(front, reflection, config),
                       roughen_by_part(front, roughness_m, rng), lobe_rad, config, antennas, freqs)
+    if config.multipath:          # second order: object parts and object and mount (bench.synth.multipath)
+        lobes = lobe_rad if lobe_rad is not None else np.full(len(materials), np.pi)
+        antennas_m = np.concatenate([antennas.rx_m, antennas.tx_m])
+        pairs = multipath.bounce_pairs(part_tris, front, reflection, lobes, antennas_m)
+        frame += multipath.simulate_pairs(pairs, antennas.tx_m, antennas.rx_m, freqs, config.element_exponent)
     if config.transmission:
         through = np.array([m.transmission for m in materials])
         back = back_wall_samples(part_tris, [t > 0 for t in through], config.sample_spacing_m)
