@@ -6,8 +6,9 @@ how far the synthetic benchmark is from the paper's real-data Tables II and III.
    `bench.app.run` (finished cells come from the result store `--store`), and writes `--out`/agreement.md:
    the synthetic tables beside the paper's (MM-2FSK.txt, Tables II and III), the ratio synthetic / paper per cell,
    the cells outside a factor 2, the ordering of the methods per metric against the paper's (Kendall's tau and the
-   pairs the paper's text stresses), and the RealSense prior's cost (Table III / Table II for MM-2FSK, paper: 7.2x
-   on P at d10).
+   pairs the paper's text stresses), the RealSense prior's cost (Table III / Table II for MM-2FSK, paper: 7.2x
+   on P at d10), and per capture how far the RealSense prior lies from the ground truth (`prior_errors`: the share
+   of pixels beyond MM-2FSK Δ10's unambiguous correction, where it must wrap).
 2. `--ablation` adds one table: the realistic preset with one effect switched off at a time (bench.synth.config.
    EFFECTS), on `--ablation-objects` with 21 frequencies (72-82 GHz in 0.5 GHz steps, which holds every
    two-frequency configuration of Table III exactly) and the cells `--ablation-cells` (no BP_max: it needs 128).
@@ -195,6 +196,30 @@ def ablation(config, objects: list[str], cells: list[str], store: Path | None, o
     return pd.DataFrame(lines)
 
 
+def prior_errors(root: Path, objects: list[str]) -> pd.DataFrame:
+    """Per capture at 30 cm: the RealSense prior against the photogrammetry prior on the radar pixels both cover:
+    median and mean |error| (mm) and the share beyond MM-2FSK's maximum unambiguous correction at the frame's
+    Δ10 pair (about 7.5 mm), where MM-2FSK Δ10 must wrap: what the paper's prior cost (7.2x on P) asks of the data."""
+    from bench.maroon import read_capture
+    from methods.api import frequency_indices, prior_image_m
+    from methods.frequencies import max_unambiguous_depth_m
+
+    lines = []
+    for name in objects:
+        capture = read_capture(root / name / "30", parts=("radar", "realsense", "mesh"))
+        grid, freqs_hz = capture.radar.grid, capture.radar.freqs_hz
+        pair = freqs_hz[frequency_indices(freqs_hz, "d10")]
+        limit_m = max_unambiguous_depth_m(float(np.ptp(pair)))
+        camera = np.asarray(prior_image_m(capture, "realsense", grid))
+        truth = np.asarray(prior_image_m(capture, "photogrammetry", grid))
+        both = np.isfinite(camera) & np.isfinite(truth)
+        error_mm = (camera - truth)[both] * 1e3
+        lines.append({"capture": name, "pixels": int(both.sum()), "median error mm": float(np.median(error_mm)),
+                      "mean |error| mm": float(np.mean(np.abs(error_mm))),
+                      f"share beyond {limit_m * 1e3:.1f} mm": float(np.mean(np.abs(error_mm) > limit_m * 1e3))})
+    return pd.DataFrame(lines)
+
+
 def _markdown(frame: pd.DataFrame) -> str:
     return tables.to_markdown(frame) if len(frame) else "(no cells)"
 
@@ -303,6 +328,8 @@ def main() -> int:
         rows = run_cells(root, cells, args.objects, store, out)
         rows.to_csv(out / "rows.csv", index=False)
         parts = report(rows, args.preset, args.objects)
+        parts += ["\n## The RealSense prior against the ground truth (what MM-2FSK Δ10 has to correct)\n",
+                  _markdown(prior_errors(root, args.objects))]
     if args.ablation:
         table = ablation(config, args.ablation_objects, args.ablation_cells, store, out)
         parts += [f"\n## Ablation: P (cm) with one effect off ({', '.join(args.ablation_objects)}; "

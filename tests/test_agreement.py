@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import pandas as pd
+import pytest
 
 from bench import agreement
 
@@ -46,3 +47,14 @@ def test_from_results_of_a_missing_folder_is_one_line(tmp_path):
                            "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [
         f"error: {tmp_path / 'nope'}: --from-results does not exist"]
+
+
+def test_prior_errors_measure_the_realsense_prior_against_the_ground_truth(synth_capture):
+    """Exact camera: no pixel beyond MM-2FSK Δ10's ~7.5 mm; a camera reading 4 % far (12 mm at 30 cm): all of them."""
+    exact = synth_capture("01_plate", 30, frequency_points=16)
+    far = synth_capture("01_plate", 30, frequency_points=16, depth_scale_error=0.04)
+    for capture, share in ((exact, 0.0), (far, 1.0)):
+        line = agreement.prior_errors(capture.parent.parent, ["01_plate"]).iloc[0]
+        column = next(c for c in line.index if c.startswith("share beyond"))
+        assert line["pixels"] > 1000 and line[column] == pytest.approx(share, abs=0.02)
+    assert 10.0 < line["median error mm"] < 13.0
