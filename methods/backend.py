@@ -105,6 +105,8 @@ class Backend:
     prefers_box_volume = False
     #: dense kernels beat the host-driven searches for few frequencies (the `roi=auto` defaults, methods.skips)
     dense_beats_search = False
+    #: 2FSK and 3FSK run their passes where the data lives (`fsk_two_pass`, `fsk_three`): one copy back
+    device_fsk = False
 
     def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m) -> np.ndarray:
         """complex64 (F, N) phasors at points_m (N, 3), radar space, metres."""
@@ -138,6 +140,18 @@ class Backend:
                    keep_on_device: bool = False, fill: str = DEFAULT_FILL) -> Prior:
         """`methods.prior.mesh_prior_m` as a Prior (on the device with `keep_on_device` where possible)."""
         return HostPrior(mesh_prior_m(mesh, photogrammetry2radar, grid, fill=fill), grid)
+
+    def fsk_two_pass(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, pixels: np.ndarray, prior_m: float,
+                     threshold_db: float | None, filter_quantity: str, timer):
+        """2FSK over the True `pixels` (ny, nx) where the data lives: (depth_m, magnitude) (ny, nx) filtered, and
+        the details (reference_pixel, z1_m) (`device_fsk` backends)."""
+        raise NotImplementedError(f"{type(self).__name__} runs 2FSK on the host")
+
+    def fsk_three(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, pixels: np.ndarray, coarse: list[int],
+                  prior_m: float, threshold_db: float | None, timer):
+        """3FSK over the True `pixels` where the data lives, `coarse` the indices of the coarse pair: (depth_m,
+        magnitude, coarse_depth_m) (ny, nx) and the details (`device_fsk` backends)."""
+        raise NotImplementedError(f"{type(self).__name__} runs 3FSK on the host")
 
     def depth_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, prior: Prior,
                        threshold_db: float | None, timer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

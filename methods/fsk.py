@@ -13,6 +13,10 @@ Region of interest and skips (methods.roi, methods.skips): both passes run only 
 strongest pixel is taken among them), and with `fsk_keep` pass 2 runs only where the filter can keep a pixel
 (methods.keep_skip); depths outside the ROI's depth interval are invalid. With neither (`roi=none`) the
 computation is today's.
+
+Without `fsk_keep`, a backend that holds the frame on a device (`Backend.device_fsk`: Warp) runs both passes,
+the strongest-pixel reduction, the depth and the filter there and copies the maps back once
+(methods.warp_backend.fsk.two_pass, the same expressions).
 """
 from __future__ import annotations
 
@@ -119,6 +123,13 @@ def finish(depth_m: np.ndarray, magnitude: np.ndarray, grid: RadarGrid, freqs_hz
                           timings_ms=timer.finish(), grid=grid, method=method, extra=extra)
 
 
+def device_result(depth_m: np.ndarray, magnitude: np.ndarray, grid: RadarGrid, freqs_hz: np.ndarray, method: str,
+                  timer: StageTimer, extra: dict, roi: Roi) -> Reconstruction:
+    """The Reconstruction of maps the device already filtered: depths outside the ROI's depth interval dropped."""
+    return Reconstruction(depth_m=roi_depth_m(depth_m, roi), magnitude=magnitude, freqs_hz=np.asarray(freqs_hz),
+                          timings_ms=timer.finish(), grid=grid, method=method, extra=extra)
+
+
 def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
                      backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE,
@@ -136,6 +147,11 @@ def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
         nan = np.full(grid.image_shape, np.nan)
         return finish(nan, nan.copy(), grid, freqs_hz, "2fsk", threshold_db, timer,
                       {"prior_m": prior_m, "roi_px": 0, "roi_sources": roi.sources}, roi)
+    if backend.device_fsk and not skips.fsk_keep:
+        depth_m, magnitude, details = backend.fsk_two_pass(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid,
+                                                           pixels, prior_m, threshold_db, filter_quantity, timer)
+        extra = {"prior_m": prior_m, **details, "roi_px": int(pixels.sum()), "roi_sources": roi.sources}
+        return device_result(depth_m, magnitude, grid, freqs_hz, "2fsk", timer, extra, roi)
     z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_img[pixels], y_img[pixels], prior_m, backend,
                                     timer)
 

@@ -24,6 +24,8 @@ and the three frequencies of the fine pass.
 Region of interest and skips: the passes run only on the ROI's pixels; with `fsk_keep` the coarse step's pass 2
 and the fine pass run only where the filter (on the fine pass's magnitude) can keep a pixel (methods.keep_skip);
 depths outside the ROI's depth interval are invalid. With neither (`roi=none`) the computation is today's.
+Without `fsk_keep`, a `device_fsk` backend (Warp) runs every pass, the depth and the filter on its device and copies
+the maps back once (methods.warp_backend.fsk.three_fsk, the same expressions).
 """
 from __future__ import annotations
 
@@ -34,8 +36,8 @@ from methods.domain.capture import RadarGrid
 from methods.backend import Backend, backend_for
 from methods.correlate import C_M_PER_S
 from methods.filtering import DEFAULT_THRESHOLD_DB
-from methods.fsk import (DEFAULT_PRIOR_M, correlate_pixels, finish, first_pass_z1_m, mean_phasor_magnitude,
-                         second_pass)
+from methods.fsk import (DEFAULT_PRIOR_M, correlate_pixels, device_result, finish, first_pass_z1_m,
+                         mean_phasor_magnitude, second_pass)
 from methods.keep_skip import run_where_kept
 from methods.method import Frame, Method
 from methods.reconstruction import Reconstruction
@@ -77,6 +79,11 @@ def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
         nan = np.full(grid.image_shape, np.nan)
         return finish(nan, nan.copy(), grid, freqs_hz, "3fsk", threshold_db, timer,
                       {**extra, "coarse_depth_m": nan.copy(), "roi_px": 0, "roi_sources": roi.sources}, roi)
+    if backend.device_fsk and not skips.fsk_keep:
+        depth_m, magnitude, coarse_m, details = backend.fsk_three(signal, freqs_hz, antennas.tx_m, antennas.rx_m,
+                                                                  grid, pixels, coarse, prior_m, threshold_db, timer)
+        extra.update(coarse_depth_m=coarse_m, **details, roi_px=int(pixels.sum()), roi_sources=roi.sources)
+        return device_result(depth_m, magnitude, grid, freqs_hz, "3fsk", timer, extra, roi)
     coarse_signal, coarse_hz = signal[:, :, coarse], freqs_hz[coarse]
     z1_m, details = first_pass_z1_m(coarse_signal, coarse_hz, antennas, x_img[pixels], y_img[pixels], prior_m,
                                     backend, timer)

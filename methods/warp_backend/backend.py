@@ -23,6 +23,7 @@ class WarpBackend(Backend):
 
     prefers_box_volume = True
     dense_beats_search = True
+    device_fsk = True
 
     def __init__(self, name: str):
         init()
@@ -122,6 +123,33 @@ class WarpBackend(Backend):
             return self.make_launch(signal, freqs_hz, tx_m, rx_m, points_m=points, reuse=True)()
         return fsk.depth_at_prior(self.buffers, correlate_points, signal, freqs_hz, grid, prior, keep_ratio,
                                   timer or StageTimer())
+
+    def _point_correlator(self, signal, freqs_hz, tx_m, rx_m):
+        """Function device points (n,) vec3d -> device phasors (F, n) of this frame (inputs looked up once)."""
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        inputs = self.frames.inputs(signal, freqs_hz, tx_m, rx_m)
+        return lambda points: correlation.make_launch(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m,
+                                                      kernel=self.default_kernel, points_m=points, reuse=True,
+                                                      inputs=inputs)()
+
+    @staticmethod
+    def _keep_ratio(threshold_db) -> float:
+        if threshold_db is not None and threshold_db < 0:
+            raise ValueError(f"threshold_db is dB below the maximum and must be >= 0, got {threshold_db}")
+        return 0.0 if threshold_db is None else float(10.0 ** (-threshold_db / 20.0))
+
+    def fsk_two_pass(self, signal, freqs_hz, tx_m, rx_m, grid, pixels, prior_m, threshold_db, filter_quantity,
+                     timer):
+        freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
+        return fsk.two_pass(self.buffers, self._point_correlator(signal, freqs_hz, tx_m, rx_m), grid, pixels,
+                            freqs_hz, prior_m, self._keep_ratio(threshold_db), filter_quantity == "first", timer)
+
+    def fsk_three(self, signal, freqs_hz, tx_m, rx_m, grid, pixels, coarse, prior_m, threshold_db, timer):
+        freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
+        coarse_signal = np.ascontiguousarray(signal[:, :, coarse])
+        return fsk.three_fsk(self.buffers, self._point_correlator(coarse_signal, freqs_hz[coarse], tx_m, rx_m),
+                             self._point_correlator(signal, freqs_hz, tx_m, rx_m), grid, pixels, freqs_hz,
+                             freqs_hz[coarse], prior_m, self._keep_ratio(threshold_db), timer)
 
     def warm_up(self, signal, freqs_hz, tx_m, rx_m, *, volume: bool, prior: bool) -> None:
         """Compile this device's kernels on a tiny problem, once per (number of frequencies, volume, prior):

@@ -218,11 +218,11 @@ class BufferPool:
             self._buffers[("constant", key)] = build()
         return self._buffers[("constant", key)]
 
-    def pinned(self, shape, dtype) -> wp.array:
-        """A reused page-locked host staging buffer (the last shape asked for)."""
-        key = ("pinned", shape, dtype)
+    def pinned(self, shape, dtype, name: str = "pinned") -> wp.array:
+        """A reused page-locked host staging buffer of that name (the last shape asked for)."""
+        key = (name, shape, dtype)
         if key not in self._buffers:
-            for old in [k for k in self._buffers if k[0] == "pinned"]:
+            for old in [k for k in self._buffers if k[0] == name]:
                 del self._buffers[old]
             self._buffers[key] = wp.empty(shape, dtype=dtype, device="cpu", pinned=True)
         return self._buffers[key]
