@@ -28,6 +28,7 @@ import numpy as np
 from bench import cli
 from bench.antennas import load_antenna_array
 from bench.perf_frames import DEFAULT_OUT, run_frames, write_rows
+from bench.progress import each
 from methods.correlate import C_M_PER_S, correlate, correlate_reference, correlate_volume
 
 ALL_FREQS_HZ = np.linspace(72e9, 82e9, 128)
@@ -88,7 +89,7 @@ def run_cases(device: str, sizes: str, repeat: int, cpu_z: int) -> list[dict]:
     rows = []
     cases = [("mm2fsk_2fsk", [120, 127], "points"), ("3fsk", [0, 64, 127], "points"),
              ("bp", [120, 127], "volume"), ("bp_max", list(range(128)), "volume")]
-    for name, idx, kind in cases:
+    for name, idx, kind in each(cases, "correlation cases", unit="case"):
         freqs_hz = ALL_FREQS_HZ[idx]
         signal = rng.standard_normal((94, 94, len(idx))) + 1j * rng.standard_normal((94, 94, len(idx)))
         row = {"case": name, "device": device, "n_freqs": len(idx)}

@@ -228,6 +228,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT / "perf_skips.csv", help="CSV written")
     args = parser.parse_args(argv)
     from bench import maroon
+    from bench.progress import steps
     from metrics.evaluate import ground_truth
 
     root = cli.existing_path(args.root, "dir", "dataset root")
@@ -236,14 +237,16 @@ def main(argv=None) -> int:
     dirs = ([cli.existing_path(root / o, "dir", "capture") for o in args.objects] if args.objects
             else maroon.discover_captures(root))
     rows: list[dict] = []
-    for capture_dir in dirs:
-        capture = maroon.read_capture(capture_dir, parts=("radar", "mesh"))
-        gt = ground_truth(capture, capture.radar.grid)
-        for cell in args.cells:
-            rows += measure_cell(capture, gt, cell, args.grid, device, args.repeat, args.mode,
-                                 None if args.reference is None else Path(args.reference), args.full_planes,
-                                 args.variants)
-            write_csv(rows, out)
+    with steps(len(dirs) * len(args.cells), "captures x cells", unit="cell") as progress:
+        for capture_dir in dirs:
+            capture = maroon.read_capture(capture_dir, parts=("radar", "mesh"))
+            gt = ground_truth(capture, capture.radar.grid)
+            for cell in args.cells:
+                rows += measure_cell(capture, gt, cell, args.grid, device, args.repeat, args.mode,
+                                     None if args.reference is None else Path(args.reference), args.full_planes,
+                                     args.variants)
+                write_csv(rows, out)
+                progress.update()
     return 0
 
 

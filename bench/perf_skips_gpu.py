@@ -26,6 +26,7 @@ from bench import cli
 from methods.domain.capture import Capture
 from bench.maroon import discover_captures, read_capture
 from bench.perf_frames import DEFAULT_OUT, write_rows
+from bench.progress import each
 from methods import reconstruct
 
 # label -> (method, frequency configuration (None = all), prior)
@@ -67,7 +68,7 @@ def run_cases(captures: list[Capture], cases: list[str], device: str, repeat: in
     rng = np.random.default_rng(seed)
     rows = []
     both = set(variants) == set(VARIANTS)
-    for label in cases:
+    for label in each(cases, "cases", unit="case"):
         method, freq, prior = CASES[label]
         times = {v: [] for v in variants}
         stages = {v: [] for v in variants}

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.progress import each
+
 C_M_PER_S = 299_792_458.0
 
 
@@ -32,7 +34,7 @@ def export_frames(root: Path, out: Path, objects: list[str] | None) -> None:
 
     dirs = [root / o for o in objects] if objects else maroon.discover_captures(root)
     arrays, index = {}, []
-    for i, capture_dir in enumerate(dirs):
+    for i, capture_dir in enumerate(each(dirs, "captures", unit="capture")):
         capture = maroon.read_capture(capture_dir, parts=("radar",))
         arrays[f"signal_{i}"] = capture.radar.signal.astype(np.complex64)
         arrays[f"freqs_{i}"] = capture.radar.freqs_hz
@@ -91,7 +93,7 @@ def write_references(frames: Path, bundle: Path, cells: list[str], grid_name: st
     tx_m, rx_m = data["tx_m"], data["rx_m"]
     g = GRIDS[grid_name]
     maps = {}
-    for i, info in enumerate(index):
+    for i, info in enumerate(each(index, "captures", unit="capture")):
         signal, freqs_hz = data[f"signal_{i}"], data[f"freqs_{i}"]
         centre = info["distance_m"]
         x_m = np.linspace(-g["xy_half_m"], g["xy_half_m"], g["nxy"])

@@ -27,6 +27,7 @@ from methods.domain.capture import Capture, RadarGrid
 from bench.grids import grid_for
 from bench.maroon import discover_captures, read_capture
 from bench.perf_frames import DEFAULT_OUT, write_rows
+from bench.progress import each
 from methods import reconstruct
 from methods.api import frequency_indices, prior_image_m
 from methods.backend import backend_for
@@ -86,12 +87,12 @@ def run_sweep(root: Path, device: str, repeat: int, bp_override: dict | None = N
     cells = table3_cells()
     mm_cells = [c for c in cells if c["method"] == "mm2fsk"]
     rows, reference = [], {}
-    for cell in cells:                               # untimed pass: compilation, device caches, reference maps
+    for cell in each(cells, "warm-up", unit="cell"):  # untimed pass: compilation, device caches, reference maps
         for cap in captures:
             rec = _cell_call(cap, cell, device, _grid(cap, cell["method"], bp_override, image_override))
             if cell["method"] == "mm2fsk":
                 reference[cap.name, cell["cell"]] = rec.depth_m
-    for cell in cells:
+    for cell in each(cells, "timing", unit="cell"):
         per_frame, method_ms, valid = [], [], 0
         for cap in captures:
             grid = _grid(cap, cell["method"], bp_override, image_override)
@@ -103,7 +104,7 @@ def run_sweep(root: Path, device: str, repeat: int, bp_override: dict | None = N
                          valid_px=valid // len(captures)))
     if mm_cells:
         per_group, max_diff = [], 0.0
-        for cap in captures:
+        for cap in each(captures, "shared MM-2FSK prior", unit="capture"):
             grid = _grid(cap, "mm2fsk", bp_override, image_override)
             runs = [_wall_ms(lambda: _shared_mm2fsk(cap, mm_cells, device, grid)) for _ in range(repeat + 1)][1:]
             per_group.append(statistics.median(ms for ms, _ in runs))

@@ -1,16 +1,80 @@
 """Progress bars for long commands (tqdm): drawn on stderr only when it is a terminal, so logs, pipes, CI and
-SLURM job files get the plain progress lines instead."""
+SLURM job files get the plain progress lines instead.
+
+`bar` is the bar itself; `steps` and `each` also route `print` and `logging` above the bar while it is drawn
+(tqdm.write), so a command's own result lines stay whole lines and the bar stays at the bottom."""
 from __future__ import annotations
 
+import contextlib
 import sys
+from collections.abc import Iterable, Iterator
+from typing import TypeVar
 
 from tqdm import tqdm
+from tqdm.contrib.logging import logging_redirect_tqdm
+
+T = TypeVar("T")
 
 
-def bar(total: int, description: str, unit: str = "step") -> tqdm:
-    """A tqdm bar on stderr, disabled when stderr is not a terminal (`disable=None` is tqdm's own rule for that)."""
-    return tqdm(total=total, desc=description, unit=unit, disable=None, file=sys.stderr, leave=False,
-                dynamic_ncols=True)
+def bar(total: int | None, description: str, unit: str = "step", enabled: bool = True) -> tqdm:
+    """A tqdm bar on stderr, disabled when stderr is not a terminal (`disable=None` is tqdm's own rule for that)
+    or when not `enabled` (e.g. a job that runs beside others on one terminal: their bars would overwrite)."""
+    return tqdm(total=total, desc=description, unit=unit, disable=None if enabled else True, file=sys.stderr,
+                leave=False, dynamic_ncols=True)
+
+
+class _LinesAboveBars:
+    """stdout while bars are drawn on `bar_file`: whole lines only, each written with the bars cleared and redrawn
+    after it (tqdm's external_write_mode), so no line starts behind a bar; a partial line waits for its newline.
+    (tqdm's own DummyTqdmFile clears the bars only when the real stdout is still `sys.stdout`.)"""
+
+    def __init__(self, stdout, bar_file):
+        self._stdout, self._bar_file, self._pending = stdout, bar_file, ""
+
+    def write(self, text: str) -> int:
+        lines, newline, self._pending = (self._pending + text).rpartition("\n")
+        if newline:
+            with tqdm.external_write_mode(file=self._bar_file):
+                self._stdout.write(lines + newline)
+                self._stdout.flush()
+        return len(text)
+
+    def flush(self) -> None:
+        self._stdout.flush()
+
+    def finish(self) -> None:
+        """Write what is left of a partial line (the bars are gone by then)."""
+        self._stdout.write(self._pending)
+        self._pending = ""
+        self._stdout.flush()
+
+    def __getattr__(self, name):             # encoding, fileno, isatty, ...: the real stdout's
+        return getattr(self._stdout, name)
+
+
+@contextlib.contextmanager
+def steps(total: int | None, description: str, unit: str = "step", enabled: bool = True) -> Iterator[tqdm]:
+    """A bar for a loop of `total` steps (call `.update()` per step); while it is drawn, stdout and logging go
+    through tqdm.write above it. Off a terminal it is `bar`'s disabled bar and nothing is redirected."""
+    with bar(total, description, unit, enabled) as progress:
+        if progress.disable or isinstance(sys.stdout, _LinesAboveBars):   # quiet, or an outer bar redirects already
+            yield progress
+            return
+        lines = _LinesAboveBars(sys.stdout, sys.stderr)
+        try:
+            with contextlib.redirect_stdout(lines), logging_redirect_tqdm():
+                yield progress
+        finally:
+            lines.finish()
+
+
+def each(items: Iterable[T], description: str, unit: str = "step", enabled: bool = True) -> Iterator[T]:
+    """The items, one bar step each (`steps`); the total is known when `items` has a length."""
+    total = len(items) if hasattr(items, "__len__") else None
+    with steps(total, description, unit, enabled) as progress:
+        for item in items:
+            yield item
+            progress.update()
 
 
 def on_terminal() -> bool:

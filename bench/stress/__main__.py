@@ -34,15 +34,13 @@ def _knobs(n_values: int | None) -> dict:
 
 def run(out: Path, quick: bool, seed: int = 0, log=print) -> dict[str, list[dict]]:
     """Run all experiments, write OUT/<name>.csv, OUT/<name>.png and OUT/summary.md; return the rows."""
-    from bench.progress import bar
+    from bench.progress import steps
     from bench.stress import hostile, noise, prior_degradation, wrapping
     from bench.synth import SynthConfig, generate_capture
 
     size = QUICK if quick else FULL
     out.mkdir(parents=True, exist_ok=True)
     results, seconds = {}, {}
-
-    progress = bar(7, "stress experiments", unit="experiment")
 
     def step(name, compute):
         progress.set_postfix_str(name)
@@ -51,22 +49,19 @@ def run(out: Path, quick: bool, seed: int = 0, log=print) -> dict[str, list[dict
         seconds[name] = time.perf_counter() - start
         pd.DataFrame(results[name]).to_csv(out / f"{name}.csv", index=False, float_format="%.6g")
         progress.update()
-        progress.clear()
-        log(f"{name}: {len(results[name])} rows in {seconds[name]:.1f} s")
-        progress.refresh()
+        log(f"{name}: {len(results[name])} rows in {seconds[name]:.1f} s")    # above the bar (steps)
 
-    step("precision", lambda: precision.precision_rows(size["distances_m"], size["grid_sizes"],
-                                                       precision.available_devices(), size["n_ref"], seed))
-    step("wrapping", lambda: wrapping.wrapping_rows(wrapping.offset_ratios(quick)))
-    step("wrapping_boundaries", lambda: wrapping.boundaries(results["wrapping"]))
-    step("noise", lambda: noise.noise_rows(size["snrs_db"], size["noise_configs"], size["realisations"], seed))
-    step("prior_degradation", lambda: prior_degradation.degradation_rows(
-        prior_degradation.build(), _knobs(size["knob_values"]), size["repetitions"], seed))
-    step("prior_breaks", lambda: prior_degradation.break_points(results["prior_degradation"]))
-    with tempfile.TemporaryDirectory() as tmp:
+    with steps(7, "stress experiments", unit="experiment") as progress, tempfile.TemporaryDirectory() as tmp:
+        step("precision", lambda: precision.precision_rows(size["distances_m"], size["grid_sizes"],
+                                                           precision.available_devices(), size["n_ref"], seed))
+        step("wrapping", lambda: wrapping.wrapping_rows(wrapping.offset_ratios(quick)))
+        step("wrapping_boundaries", lambda: wrapping.boundaries(results["wrapping"]))
+        step("noise", lambda: noise.noise_rows(size["snrs_db"], size["noise_configs"], size["realisations"], seed))
+        step("prior_degradation", lambda: prior_degradation.degradation_rows(
+            prior_degradation.build(), _knobs(size["knob_values"]), size["repetitions"], seed))
+        step("prior_breaks", lambda: prior_degradation.break_points(results["prior_degradation"]))
         source = generate_capture(Path(tmp) / "source", "01_plate", 30, SynthConfig(frequency_points=16, seed=seed))
         step("hostile", lambda: hostile.hostile_rows(source, Path(tmp) / "work"))
-    progress.close()
     pd.DataFrame({"experiment": list(seconds), "seconds": list(seconds.values())}).to_csv(
         out / "timings.csv", index=False, float_format="%.1f")
     _report(out, results, seconds, quick)
