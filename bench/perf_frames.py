@@ -33,6 +33,7 @@ import numpy as np
 
 from bench import cli
 from bench.antennas import load_antenna_array
+from bench.progress import each
 from methods.domain.capture import CameraIntrinsics, Capture, DepthFrame, Metadata, RadarFrame, RadarGrid
 from methods import reconstruct
 from methods.correlate import C_M_PER_S
@@ -260,8 +261,9 @@ def run_frames(device: str, repeat: int, bp_nz: int, scene: str = "masked", root
     """One row per case (method, freq, prior) and, with a sensor prior, per fill of new-frame and repeated-frame
     timings on `scene`'s captures."""
     captures = scene_captures(scene, root)
+    todo = [(*case, fill) for case in cases for fill in (fills if case[2] in SENSOR_PRIORS else fills[:1])]
     return [time_case(captures, method, freq, prior, device, repeat, bp_nz, fill=fill)
-            for method, freq, prior in cases for fill in (fills if prior in SENSOR_PRIORS else fills[:1])]
+            for method, freq, prior, fill in each(todo, "frame cases", unit="case")]
 
 
 def write_rows(rows: list[dict], path: Path, columns: list[str] | None = None, digits: int = 4) -> None:

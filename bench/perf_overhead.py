@@ -25,6 +25,7 @@ from pathlib import Path
 from bench import cli
 from bench.perf_frames import DEFAULT_OUT, write_rows
 from bench.perf_sweep import table3_cells
+from bench.progress import each
 
 STAGES = ("read", "ground_truth", "store_key", "store", "method", "metrics", "outputs")
 
@@ -70,7 +71,7 @@ def measure(root: Path, cells: list[str], captures: list[str] | None, device: st
 
     rows = []
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        for name in cells:
+        for name in each(cells, "cells", unit="cell"):
             overrides = [f"cell={name}", "dataset=maroon", f"dataset.root={root}", f"device={device}",
                          f"store.dir={work / 'store' if use_store else 'null'}"]
             if captures:

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from bench import cli, maroon, safe_io
 from bench.perf_frames import DEFAULT_OUT, write_rows
+from bench.progress import each
 
 SEQUENCE_ROOT = DEFAULT_OUT / "sequence"
 SEQUENCE_CAPTURE = "04_bottle/30"
@@ -133,9 +134,8 @@ def stream(capture_dir: Path, args) -> list[dict]:
     scorer = None if args.no_metrics else Scorer()
     run_pass(reader, frames, args, scorer, overlapped=False)              # warm-up: compilation, ground truths
     passes = {"serial": [], "overlapped": []}
-    for _ in range(args.passes):
-        for schedule in passes:
-            passes[schedule].append(run_pass(reader, frames, args, scorer, overlapped=schedule == "overlapped"))
+    for _, schedule in each([(i, s) for i in range(args.passes) for s in passes], "passes", unit="pass"):
+        passes[schedule].append(run_pass(reader, frames, args, scorer, overlapped=schedule == "overlapped"))
     rows = []
     for schedule, runs in passes.items():
         fps = [len(frames) / run["wall_s"] for run in runs]
