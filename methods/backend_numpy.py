@@ -11,23 +11,39 @@ formed in float64 per point and reduced mod 2 pi. Result: ~1e-5 relative error a
 """
 from __future__ import annotations
 
+import functools
+import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from methods.backend import Backend, check_inputs, grid_vectors
 from methods.depth_peak import peak_depth_m
 from methods.timing import StageTimer
 
 C_M_PER_S = 299_792_458.0
-CHUNK_POINTS = 2048     # points per block: keeps the (chunk x 2*94) float32 work arrays in L2 cache
+CHUNK_POINTS = 2048     # most points per block: keeps the (chunk x 2*94) float32 work arrays in L2 cache
 
 
 def _n_threads() -> int:
     """Worker threads over point chunks: CORRELATE_THREADS if set, else one per CPU core."""
     return max(1, int(os.environ.get("CORRELATE_THREADS", "0")) or (os.cpu_count() or 1))
+
+
+@functools.cache
+def _blas_controller() -> ThreadpoolController:
+    """The process's BLAS thread pools, inspected once: `threadpool_limits` scans every loaded library on each
+    call (1-4 ms per frame in a sweep process that has loaded Open3D, h5py and scipy)."""
+    return ThreadpoolController()
+
+
+def chunk_starts(n_points: int, n_threads: int) -> range:
+    """Starts of equal point chunks of at most CHUNK_POINTS, as many as a multiple of `n_threads`: 13.7 k points
+    (a catalogue frame) on 2 threads make 8 chunks of 1.7 k, not 7 of 2048 leaving one thread a chunk alone."""
+    n_chunks = max(1, math.ceil(n_points / (CHUNK_POINTS * n_threads))) * n_threads
+    return range(0, n_points, max(1, math.ceil(n_points / n_chunks)))
 
 
 def path_excess_m(points_m: np.ndarray, norm_m: np.ndarray, ant_m: np.ndarray) -> np.ndarray:
@@ -100,22 +116,22 @@ def correlate_numpy(signal: np.ndarray, freqs_hz: np.ndarray, tx_m: np.ndarray, 
     blocks = [_real_block_matrix(signal[:, :, i] * scale) for i in range(len(freqs_hz))]
     wavenumbers = 2.0 * np.pi * freqs_hz / C_M_PER_S
     out = np.empty((len(freqs_hz), len(points_m)), dtype=np.complex64)
-    starts = range(0, len(points_m), CHUNK_POINTS)
+    n_threads = _n_threads()
+    starts = chunk_starts(len(points_m), n_threads)
 
     def work(start: int) -> None:
-        stop = min(start + CHUNK_POINTS, len(points_m))
+        stop = min(start + starts.step, len(points_m))
         chunk_out = np.empty((len(freqs_hz), stop - start), dtype=np.complex64)
         _correlate_chunk(blocks, wavenumbers, tx_m, rx_m, points_m[start:stop], chunk_out)
         out[:, start:stop] = chunk_out
 
-    n_threads = _n_threads()
     if n_threads == 1 or len(starts) == 1:
         for s in starts:
             work(s)
     else:
         # each worker runs single-threaded BLAS products: BLAS threads on top of ours oversubscribe the cores
         # (measured 0.37 s instead of 0.19 s for 301x301 points x 2 frequencies on 2 cores)
-        with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(n_threads) as pool:
+        with _blas_controller().limit(limits=1, user_api="blas"), ThreadPoolExecutor(n_threads) as pool:
             list(pool.map(work, starts))
     return out
 

@@ -161,3 +161,18 @@ def test_bad_inputs_raise_clear_errors():
         correlate(np.zeros((94, 94, 2)), ALL_FREQS_HZ[:3], ANT.tx_m, ANT.rx_m, np.zeros((1, 3)))
     with pytest.raises(ValueError, match="device must be one of"):
         resolve_device("gpu")
+
+
+@pytest.mark.parametrize("n_threads", [1, 2, 3, 16])
+def test_cpu_chunks_cover_every_point_once_in_balanced_blocks(n_threads):
+    import math
+
+    from methods.backend_numpy import CHUNK_POINTS, chunk_starts
+
+    for n_points in (0, 1, 5, 2047, 2048, 4097, 13680, 90601):
+        starts = chunk_starts(n_points, n_threads)
+        covered = np.concatenate([np.arange(s, min(s + starts.step, n_points)) for s in starts] or [[]])
+        np.testing.assert_array_equal(covered, np.arange(n_points))
+        assert starts.step <= max(CHUNK_POINTS, 1)
+        # the slowest thread does at most one chunk more than an even share
+        assert math.ceil(len(starts) / n_threads) * starts.step <= n_points / n_threads + starts.step
