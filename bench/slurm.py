@@ -14,12 +14,13 @@ submitting process and before anything is submitted:
   (at most what a node of the partition has: more would leave the job pending forever), and, with
   `timeout_min: 0`, a time limit from the cell (`time_limit_min`).
 
-Then it waits for every job without relying on accounting: a job is done when submitit's result file appears, and
-dead when SLURM no longer lists it (squeue) and no result came; its cause comes from `sacct` (accounting: state,
-exit code, run time, the steps' MaxRSS against ReqMem) or `scontrol` (the controller), and from its log (time limit,
-cancellation, out of memory, the job's own `error:` line); the message says which of them it read. When any job did not finish, the rows of the jobs that did are merged (bench.sweep), each missing cell is
-named with its cause on stderr, and the sweep exits 1. A re-run of the same command recomputes only the missing
-cells (the store).
+Then it waits for every job without relying on accounting: a job is done when submitit's result file appears and
+holds a finished cell, and dead when SLURM no longer lists it (squeue) and no result came; its cause comes from
+`sacct` (accounting: state, exit code, run time, the steps' MaxRSS against ReqMem) or `scontrol` (the controller),
+and from its log (time limit, cancellation, out of memory, the job's own `error:` line), or from its result (a job
+stopped at SLURM's time-limit warning); the message says which it read. When any job did not finish, the rows of
+the jobs that did are merged (bench.sweep), each missing cell is named with its cause on stderr, and the sweep
+exits 1. A re-run of the same command recomputes only the missing cells (the store).
 """
 from __future__ import annotations
 
@@ -33,10 +34,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hydra.core.singleton import Singleton
-from hydra.core.utils import JobReturn, filter_overrides
+from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
 from omegaconf import DictConfig, OmegaConf, open_dict
+from submitit.core.utils import UncompletedJobError
 
 from bench import cli
 
@@ -188,6 +190,21 @@ def death_cause(job, timeout_min: int, mem_gb: int | None) -> str:
     return f"{cause} [{f'{record.source}: {state}' if record.source else 'job log; no accounting'}]"
 
 
+def result_cause(result: JobReturn, timeout_min: int, signal_delay_s: int) -> str | None:
+    """Why a job that returned a result did not finish its cell, or None when it did. A job still running when
+    SLURM's time-limit warning comes (submitit's --signal, `signal_delay_s` before the limit) raises submitit's
+    UncompletedJobError in the task (the launcher never requeues: max_num_timeout 0); Hydra keeps that exception
+    in a FAILED JobReturn, which submitit stores as a successful result, so sacct says COMPLETED."""
+    if result.status != JobStatus.FAILED:
+        return None
+    err = result._return_value       # the JobReturn's exception (its `return_value` property re-raises it)
+    text = " ".join(str(err).split())
+    if isinstance(err, UncompletedJobError) and "timed-out" in text:
+        return (f"timed out (time limit {timeout_min} min; stopped at SLURM's warning {signal_delay_s} s before "
+                f"it) [job result: {text}]")
+    return f"failed: {type(err).__name__}: {text} [job result]"
+
+
 class CheckedSlurmLauncher(SlurmLauncher):
     """hydra-submitit's SLURM launcher with the checks, sizing and failure handling of the module doc."""
 
@@ -269,10 +286,16 @@ class CheckedSlurmLauncher(SlurmLauncher):
                 if Path(job.paths.result_pickle).exists():
                     pending.remove(entry)
                     try:
-                        returns.append(job.results()[0])
-                        print(f"[done] {cell}: job {job.job_id}", flush=True)
+                        result = job.results()[0]
                     except Exception as err:   # noqa: BLE001 -- submitit re-raises the job's own exception
                         missing.append((cell, f"job {job.job_id} failed: {str(err).strip().splitlines()[-1]}"))
+                        continue
+                    cause = result_cause(result, timeout, int(self.params.get("signal_delay_s") or 0))
+                    if cause is None:
+                        returns.append(result)
+                        print(f"[done] {cell}: job {job.job_id}", flush=True)
+                    else:
+                        missing.append((cell, f"job {job.job_id} {cause}; log: {job.paths.stderr}"))
                 elif listed is not None and str(job.job_id) not in listed:
                     first = gone_since.setdefault(job.job_id, time.monotonic())
                     if time.monotonic() - first > GONE_GRACE_S:

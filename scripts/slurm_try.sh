@@ -8,10 +8,12 @@
 #   5. a job that fails with its own error (MM-2FSK asked for all frequencies) beside a cell from the store;
 #   6. jobs killed for memory (50 MB per CPU, 100 MB per job: a job from the store peaks at 160-310 MB; slurmd
 #      polls every 2 s and kills the step, jobacct_gather/linux OverMemoryKill);
-#   7. a job that times out (BP_max without skips under a 1-minute limit, one BLAS thread) beside a cell that
-#      finishes.
-# 5-7 each: the missing cells named with their cause, the finished ones merged, exit 1. With --accounting the
-# cluster runs slurmdbd (MariaDB) and every cause must come from sacct (`[sacct: <state>, exit code <code>]`);
+#   7. a job killed at its time limit (BP_max without skips under a 1-minute limit, one BLAS thread, no warning
+#      signal) beside a cell that finishes;
+#   8. the same under a 2-minute limit with SLURM's warning signal 60 s before it (submitit's --signal, as the
+#      presets have it with 120 s): the job stops itself and exits cleanly, reported timed out from its result.
+# 5-8 each: the missing cells named with their cause, the finished ones merged, exit 1. With --accounting the
+# cluster runs slurmdbd (MariaDB) and the causes of 3-7 must come from sacct (`[sacct: <state>, exit code <code>]`);
 # without, from scontrol or the job's log.
 # Usage: sudo bash scripts/slurm_try.sh [--accounting] [OUT]   (default OUT: outputs/slurm-try; any disk will do,
 # as BENCH_SLURM_LOCAL_PATHS=1 is set: this cluster has one node). Steps 1-4 took 5.8 min at load 13 on 2 cores
@@ -90,8 +92,16 @@ check "6. both cells are named out of memory" \
     'out of memory')))" "2"
 check "6. nothing finished, nothing merged" "$(grep -c 'no cell finished: nothing to merge' "$out/run6.log")" "1"
 
-OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 failing "7. a job that times out" run7 table3 \
-    "hydra.sweeper.params.cell='mm2fsk_d8,bp_full'" +roi=none hydra.launcher.timeout_min=1
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1   # the BP_max jobs below run to their limits: one core only
+slow=("hydra.sweeper.params.cell='mm2fsk_d8,bp_full'" +roi=none)
+failing "7. a job killed at its time limit" run7 table3 "${slow[@]}" hydra.launcher.timeout_min=1 \
+    hydra.launcher.signal_delay_s=0
 check "7. the slow cell is named timed out" "$(cause run7 bp_full 'timed out \(time limit 1 min')" "1"
 check "7. the finished cell is merged" "$(counts "$out/run7")" "2 computed, 0 cached"
+
+source="job result"   # stopped by submitit at SLURM's warning, the job exits cleanly: sacct says COMPLETED
+failing "8. a job stopped at its time-limit warning" run8 table3 "${slow[@]}" hydra.launcher.timeout_min=2 \
+    hydra.launcher.signal_delay_s=60
+check "8. the slow cell is named timed out" "$(cause run8 bp_full "timed out \(time limit 2 min; stopped at SLURM's warning")" "1"
+check "8. the finished cell is merged" "$(counts "$out/run8")" "0 computed, 2 cached"
 echo "SLURM path ok (${mode:-no accounting}); logs and sweep roots in $out"

@@ -97,11 +97,30 @@ def test_a_dead_jobs_cause_from_scontrol_when_sacct_has_none(monkeypatch, tmp_pa
         if command[0] == "sacct":
             return subprocess.CompletedProcess(command, 1, "", "sacct: error: Slurm accounting storage is disabled")
         return subprocess.CompletedProcess(command, 0, "JobId=7 JobName=bench-x JobState=TIMEOUT Reason=TimeLimit "
-                                                       "ExitCode=0:0 RunTime=00:01:12 MinMemoryCPU=100M TRES=cpu=2,mem=200M,node=1", "")
+                                                       "ExitCode=0:0 RunTime=00:01:12 MinMemoryCPU=100M "
+                                                       "TRES=cpu=2,mem=200M,node=1", "")
 
     monkeypatch.setattr(slurm.subprocess, "run", fake_run)
     assert slurm.death_cause(_dead_job(tmp_path, ""), timeout_min=1, mem_gb=8) == \
         "timed out (time limit 1 min, ran 00:01:12) [scontrol: TIMEOUT, exit code 0:0]"
+
+
+def test_a_job_stopped_at_the_time_limit_warning_is_timed_out_not_done():
+    """submitit answers SLURM's warning signal with UncompletedJobError inside the task; Hydra keeps it in a FAILED
+    JobReturn that submitit stores as a success (seen on the single-node cluster: sacct said COMPLETED)."""
+    from hydra.core.utils import JobReturn, JobStatus
+    from submitit.core.utils import UncompletedJobError
+
+    def result(status, value):
+        ret = JobReturn(status=status)
+        ret._return_value = value
+        return ret
+
+    assert slurm.result_cause(result(JobStatus.COMPLETED, None), 1, 30) is None
+    warned = result(JobStatus.FAILED, UncompletedJobError("Job not requeued because: timed-out too many times."))
+    assert slurm.result_cause(warned, 2, 60).startswith("timed out (time limit 2 min; stopped at SLURM's warning "
+                                                        "60 s before it) [job result: Job not requeued")
+    assert slurm.result_cause(result(JobStatus.FAILED, KeyError("x")), 2, 60) == "failed: KeyError: 'x' [job result]"
 
 
 def test_a_temp_folder_of_a_live_process_on_another_host_is_a_leftover(tmp_path):
@@ -118,7 +137,7 @@ def test_a_temp_folder_of_a_live_process_on_another_host_is_a_leftover(tmp_path)
 
 def _slurm_try_skip_reason(accounting: bool) -> str | None:
     if os.environ.get("BENCH_SLURM_TRY") != "1":
-        return ("opt-in (about 5-10 min per mode: starts SLURM daemons, runs seven small sweeps): BENCH_SLURM_TRY=1 as "
+        return ("opt-in (about 5-10 min per mode: starts SLURM daemons, runs eight small sweeps): BENCH_SLURM_TRY=1 as "
                 "root on Debian/Ubuntu with slurmctld, slurmd and munge installable"
                 + (", and slurmdbd and mariadb-server for accounting" if accounting else ""))
     if os.geteuid() != 0:
@@ -138,8 +157,9 @@ def _slurm_try_skip_reason(accounting: bool) -> str | None:
     ids=["no-accounting", "accounting"])
 def test_the_slurm_path_on_a_single_node_cluster(accounting):
     """scripts/slurm_try.sh: sweep, re-run from the store, a cancelled job resumed, a job failing with its own
-    error, jobs killed for memory, a job timing out; each cause read from sacct with accounting, else from scontrol
-    or the job's log. The daemons are stopped afterwards (their jobs' CPU load counts against everyone's timings)."""
+    error, jobs killed for memory, a job killed at its time limit and one stopped at the limit's warning signal;
+    each cause read from sacct with accounting, else from scontrol or the job's log (the warning: the job's result).
+    The daemons are stopped afterwards (their jobs' CPU load counts against everyone's timings)."""
     out = REPO / "outputs" / f"slurm-try-test-{'accounting' if accounting else 'none'}"
     try:
         proc = subprocess.run(["bash", str(REPO / "scripts" / "slurm_try.sh"),
@@ -149,4 +169,4 @@ def test_the_slurm_path_on_a_single_node_cluster(accounting):
         subprocess.run(["bash", str(REPO / "scripts" / "slurm_single_node.sh"), "stop"], capture_output=True,
                        timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert proc.stdout.count("ok: ") == 15, proc.stdout
+    assert proc.stdout.count("ok: ") == 18, proc.stdout
