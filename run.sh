@@ -5,6 +5,27 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 
+# requirements open3d: pyproject's open3d-cpu line; requirements rest: the others (with the test extra) and
+# open3d-cpu's own minus those its import never loads (run.sh's set-up, below)
+requirements() {
+  .venv/bin/python - "$1" <<'PY'
+import importlib.metadata, re, sys, tomllib
+project = tomllib.load(open("pyproject.toml", "rb"))["project"]
+ours = project["dependencies"] + project["optional-dependencies"]["test"]
+name = lambda line: re.match(r"[A-Za-z0-9._-]+", line)[0].lower()
+if sys.argv[1] == "open3d":
+    print(*[line for line in ours if name(line) == "open3d-cpu"], sep="\n")
+    sys.exit()
+try:
+    theirs = importlib.metadata.requires("open3d-cpu") or []
+except importlib.metadata.PackageNotFoundError:  # another platform: the full open3d with all it declares
+    theirs = []
+unused = {"ipywidgets", "nbformat", "configargparse"}
+print(*[line for line in ours if name(line) != "open3d-cpu"],
+      *[line for line in theirs if "extra ==" not in line and name(line) not in unused], sep="\n")
+PY
+}
+
 need_libusb() { ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; }
 
 setup() {
@@ -29,7 +50,16 @@ setup() {
   if [ ! -f "$stamp" ]; then
     echo "[setup] installing the package and its dependencies into .venv (first run: about a minute)"
     .venv/bin/python -m pip install -q --upgrade pip
-    .venv/bin/python -m pip install -q -e ".[test]"
+    # open3d-cpu declares ipywidgets, nbformat and ConfigArgParse (Jupyter widgets, notebook files, a CLI helper:
+    # with IPython and jedi ~90 MB) that `import open3d` never loads. Install it without its declared
+    # dependencies, then ours plus those of its own that its import does load (dash, plotly, flask: its
+    # visualization package imports its plotly viewer), then this package without resolving again. A plain
+    # `pip install .` still works and brings them all.
+    requirements open3d > .venv/requirements-open3d.txt
+    .venv/bin/python -m pip install -q --no-deps -r .venv/requirements-open3d.txt
+    requirements rest > .venv/requirements-rest.txt
+    .venv/bin/python -m pip install -q --no-warn-conflicts -r .venv/requirements-rest.txt
+    .venv/bin/python -m pip install -q --no-deps -e .
     rm -f .venv/.installed-*; touch "$stamp"
   fi
 }
