@@ -170,14 +170,15 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
         with timer.stage("prior"):
             run_prior = prior_image_m(capture, prior_value, grid, backend, keep_on_device=method.device_prior,
                                       **(prior_options or {}))
-        if not run_prior.n_covered:          # an explicit all-invalid result (invalid_reason) below
-            invalid_reason = f"the {prior_value} prior of capture {capture.name} covers no radar pixel"
     elif prior_value is None and "none" not in method.priors:
         run_prior = scalar_prior_m          # a method of scalar priors starts from the default one
     else:
         run_prior = prior_value
     result = method.run(Frame(signal, freqs_hz, antennas, grid, region, skips, threshold_db, capture.name),
                         run_prior, backend, timer)
+    # an explicit all-invalid result; counted after the run (a deferred device prior is built by the method)
+    if prior_value in SENSOR_PRIORS and not run_prior.n_covered:
+        invalid_reason = f"the {prior_value} prior of capture {capture.name} covers no radar pixel"
     if invalid_reason is None and not result.valid.any():
         invalid_reason = "no pixel has a nonzero magnitude within the filter threshold (a frame without signal?)"
     result.extra.update(freq=freq, prior=prior)

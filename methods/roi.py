@@ -54,13 +54,13 @@ def full_roi(grid: RadarGrid) -> Roi:
 def roi_from_mask_bb(mask_bb_m: Mapping[str, float], grid: RadarGrid) -> Roi:
     """Pixels whose centre lies inside the x/y bounds of `mask_bb_m`, depths inside its z bounds (inclusive, as
     MAROON's metrics keep a point); absent bounds do not restrict."""
-    x_m, y_m = grid.pixel_xy_m()
-    inside = np.ones(grid.image_shape, dtype=bool)
-    for axis, coord in (("x", x_m), ("y", y_m)):
+    cols, rows = np.ones(grid.image_shape[1], dtype=bool), np.ones(grid.image_shape[0], dtype=bool)
+    for axis, coord, keep in (("x", grid.x_m, cols), ("y", grid.y_m[::-1], rows)):    # x per column, y per row
         if f"{axis}min" in mask_bb_m:
-            inside &= coord >= float(mask_bb_m[f"{axis}min"])
+            keep &= coord >= float(mask_bb_m[f"{axis}min"])
         if f"{axis}max" in mask_bb_m:
-            inside &= coord <= float(mask_bb_m[f"{axis}max"])
+            keep &= coord <= float(mask_bb_m[f"{axis}max"])
+    inside = rows[:, None] & cols[None, :]          # (no (ny, nx) coordinate images: a new frame pays this)
     return Roi(inside, float(mask_bb_m.get("zmin", -np.inf)), float(mask_bb_m.get("zmax", np.inf)), ("mask_bb",))
 
 

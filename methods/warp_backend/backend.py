@@ -8,11 +8,13 @@ import warp as wp
 from methods import range_compression
 from methods.backend import Backend, check_inputs, grid_vectors
 from methods.filtering import DEFAULT_THRESHOLD_DB
-from methods.prior import DEFAULT_FILL
+from methods.prior import DEFAULT_FILL, DEFAULT_MAX_JUMP_MM
 from methods.prior_image import Prior
 from methods.timing import StageTimer
 from methods.warp_backend import correlation, fsk, prior
+from methods.warp_backend.frame_graph import frame_graph
 from methods.warp_backend.frames import BufferPool, FrameCache
+from methods.warp_backend.prior import DeferredPrior
 from methods.warp_backend.runtime import init
 
 
@@ -101,6 +103,8 @@ class WarpBackend(Backend):
     def realsense_prior(self, depth, realsense2radar, grid, keep_on_device: bool = False,
                         fill: str = DEFAULT_FILL) -> Prior:
         if keep_on_device and self.rasterises_prior:
+            if fill == "scanline":                 # built inside MM-2FSK's frame graph (depth_at_prior)
+                return prior.DeferredPrior(self.buffers, depth, realsense2radar, grid, DEFAULT_MAX_JUMP_MM)
             return prior.realsense_prior(self.buffers, depth, realsense2radar, grid, fill=fill)
         return super().realsense_prior(depth, realsense2radar, grid, fill=fill)
 
@@ -118,11 +122,20 @@ class WarpBackend(Backend):
             raise ValueError(f"threshold_db is dB below the maximum and must be >= 0, got {threshold_db}")
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         keep_ratio = 0.0 if threshold_db is None else float(10.0 ** (-threshold_db / 20.0))
+        timer = timer or StageTimer()
+        if isinstance(prior, DeferredPrior) and prior.pending and len(freqs_hz) == 2:
+            with timer.stage("correlate"):             # the prior, correlation, depth and filter: one graph
+                graph = frame_graph(self.buffers, prior.depth, prior.realsense2radar, grid, prior.max_jump_mm,
+                                    freqs_hz, tx_m, rx_m, keep_ratio)
+                depth_m, magnitude, prior_m, n_covered = graph.run(prior.depth, signal)
+            prior.resolve(prior_m, n_covered)
+            return depth_m, magnitude, prior_m
+        if isinstance(prior, DeferredPrior):
+            prior = prior.materialise()
 
         def correlate_points(points):
             return self.make_launch(signal, freqs_hz, tx_m, rx_m, points_m=points, reuse=True)()
-        return fsk.depth_at_prior(self.buffers, correlate_points, signal, freqs_hz, grid, prior, keep_ratio,
-                                  timer or StageTimer())
+        return fsk.depth_at_prior(self.buffers, correlate_points, signal, freqs_hz, grid, prior, keep_ratio, timer)
 
     def _point_correlator(self, signal, freqs_hz, tx_m, rx_m):
         """Function device points (n,) vec3d -> device phasors (F, n) of this frame (inputs looked up once)."""

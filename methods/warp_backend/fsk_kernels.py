@@ -155,3 +155,36 @@ def slope_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
     mag = wp.length((ph[0, i] + ph[1, i] + c3) / wp.float32(3.0))
     maps[1, p] = wp.float64(mag)
     wp.atomic_max(peak, 0, mag)
+
+
+@wp.kernel(enable_backward=False)
+def depth_at_prior_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
+                           count: wp.array(dtype=wp.int32), m_per_rad: wp.float64, maps: wp.array2d(dtype=wp.float64),
+                           peak: wp.array(dtype=wp.float32)):
+    """`fsk_depth_at_prior` over a launch of fixed size (a CUDA graph): threads from count[0] on do nothing."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    p = pixel[i]
+    c1 = ph[0, i]
+    c2 = ph[1, i]
+    re = c2[0] * c1[0] + c2[1] * c1[1]
+    im = c2[1] * c1[0] - c2[0] * c1[1]
+    maps[0, p] = maps[2, p] - m_per_rad * wp.float64(wp.atan2(im, re))
+    mag = wp.length((c1 + c2) * wp.float32(0.5))
+    maps[1, p] = wp.float64(mag)
+    wp.atomic_max(peak, 0, mag)
+
+
+@wp.kernel(enable_backward=False)
+def magnitude_filter_counted(pixel: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
+                             keep_ratio: wp.float64, peak: wp.array(dtype=wp.float32),
+                             maps: wp.array2d(dtype=wp.float64)):
+    """`magnitude_filter` over a launch of fixed size: threads from count[0] on do nothing."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    p = pixel[i]
+    mag = maps[1, p]
+    if mag <= wp.float64(0.0) or mag < wp.float64(peak[0]) * keep_ratio:
+        maps[0, p] = wp.float64(wp.nan)

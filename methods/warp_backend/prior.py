@@ -45,6 +45,48 @@ class DevicePrior(Prior):
         return z
 
 
+class DeferredPrior(Prior):
+    """A RealSense prior with the scanline fill not built yet: MM-2FSK builds it inside its frame's CUDA graph
+    (`frame_graph`, `WarpBackend.depth_at_prior`); any other use builds it step by step first (`materialise`)."""
+
+    device_resident = True
+
+    def __init__(self, buffers: BufferPool, depth: DepthFrame, realsense2radar: np.ndarray, grid: RadarGrid,
+                 max_jump_mm: float | None):
+        self.buffers, self.depth, self.realsense2radar, self.grid = buffers, depth, realsense2radar, grid
+        self.max_jump_mm, self.shape = max_jump_mm, grid.image_shape
+        self._built: DevicePrior | None = None
+        self._host: np.ndarray | None = None
+        self._n: int | None = None
+
+    @property
+    def pending(self) -> bool:
+        """Neither built step by step nor computed by a frame graph yet."""
+        return self._built is None and self._n is None
+
+    def resolve(self, host_m: np.ndarray, n_covered: int) -> None:
+        """Record what the frame graph computed: the prior (ny, nx) on the host and its covered pixels."""
+        self._host, self._n = host_m, n_covered
+
+    def materialise(self) -> DevicePrior:
+        """The prior built on the device step by step (`realsense_prior`, fill 'scanline')."""
+        if self._built is None:
+            self._built = realsense_prior(self.buffers, self.depth, self.realsense2radar, self.grid,
+                                          max_jump_mm=self.max_jump_mm, fill="scanline")
+        return self._built
+
+    @property
+    def n_covered(self) -> int:
+        return self._n if self._n is not None else self.materialise().n_covered
+
+    @property
+    def zbuf(self) -> wp.array:
+        return self.materialise().zbuf
+
+    def host_m(self) -> np.ndarray:
+        return self._host if self._host is not None else self.materialise().host_m()
+
+
 def pixel_scale(grid: RadarGrid) -> tuple[float, float, float, float]:
     """(xmin, ymax, columns per metre, rows per metre), as `prior._to_radar_pixels`."""
     (xmin, ymin, _), (xmax, ymax, _) = grid.bb_min_m, grid.bb_max_m
@@ -87,6 +129,19 @@ def _finish(buffers: BufferPool, zbuf, stats, grid, fill_holes: bool, fill: str 
     return DevicePrior(zbuf, grid, n_covered, filled)
 
 
+def upload(buffers: BufferPool, name: str, host: np.ndarray, dtype) -> wp.array:
+    """`host` in the pool's device buffer `name`: on CUDA through a reused pinned staging buffer (an asynchronous
+    DMA; the previous frame's copy finished at its copy back), on Warp-CPU a copy."""
+    target = buffers.get(name, host.shape, dtype)
+    if target.device.is_cpu:
+        target.assign(host)
+        return target
+    staging = buffers.pinned(host.shape, dtype, name=name + ".pinned")
+    np.copyto(staging.numpy(), host, casting="unsafe")
+    wp.copy(target, staging)
+    return target
+
+
 def cleared_zbuffer(buffers: BufferPool, grid: RadarGrid):
     """A new z-buffer of `grid` (no prior anywhere) and the pool's cleared coverage statistics."""
     dev = buffers.wp_device
@@ -105,13 +160,12 @@ def realsense_prior(buffers: BufferPool, depth: DepthFrame, realsense2radar: np.
     zbuf, stats = cleared_zbuffer(buffers, grid)
     dev = buffers.wp_device
     height, width = depth.depth_mm.shape
-    d_img = wp.array(np.ascontiguousarray(depth.depth_mm, dtype=np.uint16), dtype=wp.uint16, device=dev)
+    d_img = upload(buffers, "prior.depth", np.asarray(depth.depth_mm, dtype=np.uint16), wp.uint16)
     if depth.mask is None:
         m_img = buffers.get("prior.no_mask", (1, 1), wp.uint8)
     else:
-        mask = np.ascontiguousarray(depth.mask)
-        mask = mask.view(np.uint8) if mask.dtype == np.bool_ else (mask != 0).view(np.uint8)
-        m_img = wp.array(mask, dtype=wp.uint8, device=dev)
+        mask = np.asarray(depth.mask)
+        m_img = upload(buffers, "prior.mask", mask.view(np.uint8) if mask.dtype == np.bool_ else mask != 0, wp.uint8)
     k = depth.intrinsics
     cam = kernels.vec9d(k.fx, k.fy, k.cx, k.cy, depth.depth_scale_m * 1000.0, *pixel_scale(grid))
     ny, nx = grid.image_shape

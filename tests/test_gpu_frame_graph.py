@@ -1,0 +1,48 @@
+"""MM-2FSK's whole new frame as one CUDA graph (`warp_backend.frame_graph`) equals the step-by-step device path
+(`warp_backend.prior.realsense_prior` with the scanline fill, then `warp_backend.fsk.depth_at_prior`) on fresh
+random frames: the same prior, covered count and valid pixels, depths within 1e-12 m (each slot is computed
+alone, so its order in the compaction changes nothing). On Warp-CPU the same launches run without a graph."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from devices import CUDA
+from methods.frequencies import config_indices
+from methods_scenes import ANTENNAS, CAMERA, MAROON_FREQS_HZ, plane_depth_frame, realsense2radar, simulate, square_grid
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_frame_graph_equals_the_step_by_step_device_path(device):
+    from methods.backend import backend_for
+    from methods.timing import StageTimer
+    from methods.warp_backend import fsk
+    from methods.warp_backend.frame_graph import frame_graph
+    from methods.warp_backend.prior import realsense_prior
+
+    backend = backend_for(device)
+    rng = np.random.default_rng()
+    cam2radar = realsense2radar()
+    grid = square_grid(0.05, 61)
+    freqs_hz = MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, "d10")]
+    rows, cols = np.mgrid[:CAMERA.height, :CAMERA.width]
+    for _ in range(2):
+        z0 = rng.uniform(0.28, 0.34)
+        frame = plane_depth_frame(z0, rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), cam2radar,
+                                  mask=(cols - 320) ** 2 + (rows - 240) ** 2 < rng.uniform(80, 200) ** 2)
+        r0, c0 = rng.integers(180, 300), rng.integers(260, 380)
+        frame.depth_mm[(rows - r0) ** 2 + (cols - c0) ** 2 < rng.uniform(5, 25) ** 2] = 0      # a camera hole
+        points = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), np.full(40, z0)])
+        signal = simulate(points, np.exp(2j * np.pi * rng.random(40)), freqs_hz)
+        keep_ratio = 10.0 ** (-14.0 / 20.0)
+        step = realsense_prior(backend.buffers, frame, cam2radar, grid, fill="scanline")
+        expected = fsk.depth_at_prior(backend.buffers, lambda p: backend.make_launch(
+            signal, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m, points_m=p, reuse=True)(), signal, freqs_hz, grid, step,
+            keep_ratio, StageTimer())
+        graph = frame_graph(backend.buffers, frame, cam2radar, grid, 10.0, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m,
+                            keep_ratio)
+        depth_m, magnitude, prior_m, n_covered = graph.run(frame, signal)
+        assert n_covered == step.n_covered > 100
+        for got, want in zip((depth_m, magnitude, prior_m), expected):
+            assert np.array_equal(np.isfinite(got), np.isfinite(want))
+            assert np.max(np.abs(got - want), where=np.isfinite(want), initial=0.0) < 1e-12
