@@ -68,6 +68,8 @@ README_RUNS: dict[str, list[str]] = {
     # starting SLURM daemons is not a test's business: syntax only (test_slurm runs them, opt-in)
     "sudo bash scripts/slurm_single_node.sh start": ["bash -n {repo}/scripts/slurm_single_node.sh"],
     "sudo bash scripts/slurm_try.sh": ["bash -n {repo}/scripts/slurm_try.sh"],
+    "sudo bash scripts/slurm_try.sh --accounting": ["bash -n {repo}/scripts/slurm_try.sh"],
+    "sudo bash scripts/slurm_single_node.sh stop": ["bash -n {repo}/scripts/slurm_single_node.sh"],
     # the report for real on a copy of the committed table3 (no job folders: no pictures, seconds)
     ".venv/bin/python -m bench.report outputs/demo/table2 outputs/demo/table3 --out outputs/demo/report.html":
         REPORT_RUN,
