@@ -46,3 +46,42 @@ def test_frame_graph_equals_the_step_by_step_device_path(device):
         for got, want in zip((depth_m, magnitude, prior_m), expected):
             assert np.array_equal(np.isfinite(got), np.isfinite(want))
             assert np.max(np.abs(got - want), where=np.isfinite(want), initial=0.0) < 1e-12
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+@pytest.mark.parametrize("freq", ["d05", "d05_d10"])
+def test_fsk_graph_equals_the_step_by_step_device_path(device, freq):
+    from methods.backend import backend_for
+    from methods.timing import StageTimer
+    from methods.warp_backend import fsk
+    from methods.warp_backend.frame_graph import fsk_graph
+
+    backend = backend_for(device)
+    rng = np.random.default_rng()
+    grid = square_grid(0.04, 41)
+    freqs_hz = MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, freq)]
+    three = len(freqs_hz) == 3
+    pixels = rng.random(grid.image_shape) < 0.8
+    z0 = rng.uniform(0.33, 0.45)
+    points = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), np.full(40, z0)])
+    signal = simulate(points, np.exp(2j * np.pi * rng.random(40)), freqs_hz)
+    keep_ratio = 10.0 ** (-14.0 / 20.0)
+
+    def correlator(sig, hz):
+        return lambda p: backend.make_launch(sig, hz, ANTENNAS.tx_m, ANTENNAS.rx_m, points_m=p, reuse=True)()
+    pair = [1, 2] if three else [0, 1]
+    if three:
+        coarse = np.ascontiguousarray(signal[:, :, pair])
+        *expected, details = fsk.three_fsk(backend.buffers, correlator(coarse, freqs_hz[pair]),
+                                           correlator(signal, freqs_hz), grid, pixels, freqs_hz, freqs_hz[pair], 0.40,
+                                           keep_ratio, StageTimer())
+    else:
+        *expected, details = fsk.two_pass(backend.buffers, correlator(signal, freqs_hz), grid, pixels, freqs_hz, 0.40,
+                                          keep_ratio, False, StageTimer())
+    maps, (z1_m, ref) = fsk_graph(backend.buffers, grid, pixels, freqs_hz, pair, three, ANTENNAS.tx_m, ANTENNAS.rx_m,
+                                  0.40, keep_ratio).run(signal)
+    assert (ref, z1_m) == (details["reference_pixel"], pytest.approx(details["z1_m"], abs=1e-12))
+    assert np.isfinite(maps[0]).sum() > 50
+    for got, want in zip(maps, expected):
+        assert np.array_equal(np.isfinite(got), np.isfinite(want))
+        assert np.max(np.abs(got - want), where=np.isfinite(want), initial=0.0) < 1e-12

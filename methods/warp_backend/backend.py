@@ -12,7 +12,7 @@ from methods.prior import DEFAULT_FILL, DEFAULT_MAX_JUMP_MM
 from methods.prior_image import Prior
 from methods.timing import StageTimer
 from methods.warp_backend import correlation, fsk, prior
-from methods.warp_backend.frame_graph import frame_graph
+from methods.warp_backend.frame_graph import frame_graph, fsk_graph
 from methods.warp_backend.frames import BufferPool, FrameCache
 from methods.warp_backend.prior import DeferredPrior
 from methods.warp_backend.runtime import init
@@ -154,11 +154,24 @@ class WarpBackend(Backend):
     def fsk_two_pass(self, signal, freqs_hz, tx_m, rx_m, grid, pixels, prior_m, threshold_db, filter_quantity,
                      timer):
         freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
+        if not self.device.is_cpu:                    # one CUDA graph per setting: stage 'correlate' holds it all
+            signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+            with timer.stage("correlate"):
+                maps, (z1_m, ref) = fsk_graph(self.buffers, grid, pixels, freqs_hz, [0, 1], False, tx_m, rx_m,
+                                              prior_m, self._keep_ratio(threshold_db),
+                                              filter_quantity == "first").run(signal)
+            return maps[0], maps[1], {"reference_pixel": ref, "z1_m": z1_m}
         return fsk.two_pass(self.buffers, self._point_correlator(signal, freqs_hz, tx_m, rx_m), grid, pixels,
                             freqs_hz, prior_m, self._keep_ratio(threshold_db), filter_quantity == "first", timer)
 
     def fsk_three(self, signal, freqs_hz, tx_m, rx_m, grid, pixels, coarse, prior_m, threshold_db, timer):
         freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
+        if not self.device.is_cpu:
+            signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+            with timer.stage("correlate"):
+                maps, (z1_m, ref) = fsk_graph(self.buffers, grid, pixels, freqs_hz, list(coarse), True, tx_m, rx_m,
+                                              prior_m, self._keep_ratio(threshold_db)).run(signal)
+            return maps[0], maps[1], maps[2], {"reference_pixel": ref, "z1_m": z1_m}
         coarse_signal = np.ascontiguousarray(signal[:, :, coarse])
         return fsk.three_fsk(self.buffers, self._point_correlator(coarse_signal, freqs_hz[coarse], tx_m, rx_m),
                              self._point_correlator(signal, freqs_hz, tx_m, rx_m), grid, pixels, freqs_hz,
