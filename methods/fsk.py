@@ -141,7 +141,6 @@ def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
     timer = timer or StageTimer()
     backend = backend_for(backend)
     roi = roi if roi is not None else full_roi(grid)
-    x_img, y_img = grid.pixel_xy_m()
     pixels = roi.pixels
     if not pixels.any():
         nan = np.full(grid.image_shape, np.nan)
@@ -152,6 +151,7 @@ def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
                                                            pixels, prior_m, threshold_db, filter_quantity, timer)
         extra = {"prior_m": prior_m, **details, "roi_px": int(pixels.sum()), "roi_sources": roi.sources}
         return device_result(depth_m, magnitude, grid, freqs_hz, "2fsk", timer, extra, roi)
+    x_img, y_img = grid.pixel_xy_m()
     z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_img[pixels], y_img[pixels], prior_m, backend,
                                     timer)
 

@@ -70,7 +70,6 @@ def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
     timer = timer or StageTimer()
     backend = backend_for(backend)
     roi = roi if roi is not None else full_roi(grid)
-    x_img, y_img = grid.pixel_xy_m()
     pixels = roi.pixels
     pairs = [(0, 1), (1, 2)]                            # the smallest difference is between neighbours
     coarse = list(min(pairs, key=lambda p: freqs_hz[p[1]] - freqs_hz[p[0]]))
@@ -84,6 +83,7 @@ def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
                                                                   grid, pixels, coarse, prior_m, threshold_db, timer)
         extra.update(coarse_depth_m=coarse_m, **details, roi_px=int(pixels.sum()), roi_sources=roi.sources)
         return device_result(depth_m, magnitude, grid, freqs_hz, "3fsk", timer, extra, roi)
+    x_img, y_img = grid.pixel_xy_m()
     coarse_signal, coarse_hz = signal[:, :, coarse], freqs_hz[coarse]
     z1_m, details = first_pass_z1_m(coarse_signal, coarse_hz, antennas, x_img[pixels], y_img[pixels], prior_m,
                                     backend, timer)

@@ -24,6 +24,7 @@ from methods.warp_backend.fsk import grid_arrays
 from methods.warp_backend.prior import pixel_scale
 
 GRAPHS_KEPT = 4
+PEAK_SHARDS = 256          # partial maxima of the magnitude (fsk_kernels.reduce_peak)
 _GRAPHS: dict = {}
 
 
@@ -115,6 +116,7 @@ class FrameGraph:
         self.stats = wp.empty(2 + 4 * ny + 2 * nx, dtype=wp.int32, device=dev)
         self.slot = wp.empty(1, dtype=wp.int32, device=dev)
         self.peak = wp.empty(1, dtype=wp.float32, device=dev)
+        self.shards = wp.empty(PEAK_SHARDS, dtype=wp.float32, device=dev)
         self.points = wp.zeros(n_px, dtype=wp.vec3d, device=dev)          # unused slots: finite points
         self.pixel = wp.zeros(n_px, dtype=wp.int32, device=dev)
         self.maps = wp.empty((3, n_px), dtype=wp.float64, device=dev)
@@ -143,7 +145,7 @@ class FrameGraph:
         wp.copy(self.m_img, self.mask_host)
         self.correlator.enqueue_tables()
         self.slot.zero_()
-        self.peak.zero_()
+        self.shards.zero_()
         wp.launch(prior_kernels.clear_zbuffer, dim=n_px, inputs=[ny, self.zbuf, self.stats], device=dev)
         wp.launch(prior_kernels.raster_camera_quads, dim=(height - 1) * (width - 1),
                   inputs=[self.d_img, self.m_img, self.use_mask, self.cam, self.xf, self.max_jump, ny, nx,
@@ -156,7 +158,8 @@ class FrameGraph:
                   device=dev)
         ph = self.correlator.enqueue(self.points)
         wp.launch(fsk_kernels.depth_at_prior_counted, dim=n_px,
-                  inputs=[ph, self.pixel, self.slot, self.m_per_rad, self.maps, self.peak], device=dev)
+                  inputs=[ph, self.pixel, self.slot, self.m_per_rad, self.maps, self.shards], device=dev)
+        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
         wp.launch(fsk_kernels.magnitude_filter_counted, dim=n_px,
                   inputs=[self.pixel, self.slot, self.keep_ratio, self.peak, self.maps], device=dev)
         wp.copy(self.maps_host, self.maps)
@@ -212,6 +215,8 @@ class FskGraph:
         self.scalars_host = wp.empty(2, dtype=wp.float64, device="cpu", pinned=pinned)
         self.first_peak = wp.empty(1, dtype=wp.float32, device=dev)
         self.peak = wp.empty(1, dtype=wp.float32, device=dev)
+        self.first_shards = wp.empty(PEAK_SHARDS, dtype=wp.float32, device=dev)
+        self.shards = wp.empty(PEAK_SHARDS, dtype=wp.float32, device=dev)
         self.ref = wp.empty(1, dtype=wp.int32, device=dev)
         self.x_m, self.y_m = grid_arrays(buffers, grid)
         self.pair_correlator = GraphCorrelator(dev, n, freqs_hz[pair], tx_m, rx_m)
@@ -230,8 +235,8 @@ class FskGraph:
     def _enqueue(self) -> None:
         dev, n, nx = self.device, self.points.shape[0], self.shape[1]
         self.maps.fill_(float("nan"))
-        self.first_peak.zero_()
-        self.peak.zero_()
+        self.first_shards.zero_()
+        self.shards.zero_()
         self.ref.fill_(2147483647)
         self.pair_correlator.enqueue_tables()
         if self.three:
@@ -239,7 +244,8 @@ class FskGraph:
         wp.launch(fsk_kernels.points_at_depth, dim=n, inputs=[self.pixel, nx, self.x_m, self.y_m, self.prior_m,
                                                               self.points], device=dev)
         ph = self.pair_correlator.enqueue(self.points)
-        wp.launch(fsk_kernels.first_magnitude_peak, dim=n, inputs=[ph, self.first_peak], device=dev)
+        wp.launch(fsk_kernels.first_magnitude_peak, dim=n, inputs=[ph, self.first_shards], device=dev)
+        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.first_shards, self.first_peak], device=dev)
         wp.launch(fsk_kernels.first_argmax, dim=n, inputs=[ph, self.first_peak, self.ref], device=dev)
         wp.launch(fsk_kernels.refocus_points, dim=n, inputs=[ph, self.ref, self.prior_m, self.m_per_rad, self.points,
                                                              self.scalars], device=dev)
@@ -250,10 +256,11 @@ class FskGraph:
             ph = self.all_correlator.enqueue(self.points)
             wp.launch(fsk_kernels.slope_depth, dim=n,
                       inputs=[ph, self.pixel, self.centred, float(C_M_PER_S / (4.0 * np.pi)), self.points, self.maps,
-                              self.peak], device=dev)
+                              self.shards], device=dev)
         else:
             wp.launch(fsk_kernels.pair_depth, dim=n, inputs=[ph, self.pixel, self.m_per_rad, self.first_only,
-                                                             self.points, self.maps, self.peak], device=dev)
+                                                             self.points, self.maps, self.shards], device=dev)
+        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
         wp.launch(fsk_kernels.magnitude_filter, dim=n, inputs=[self.pixel, self.keep_ratio, self.peak, self.maps],
                   device=dev)
         wp.copy(self.maps_host, self.maps)
@@ -276,12 +283,11 @@ class FskGraph:
 def fsk_graph(buffers, grid, pixels: np.ndarray, freqs_hz, pair: list[int], three: bool, tx_m, rx_m, prior_m: float,
               keep_ratio: float, first_only: bool = False) -> FskGraph:
     """The FskGraph of this setting (pixels (ny, nx) bool, row-major order), built and captured on first use."""
-    flat = np.flatnonzero(pixels)
-    key = ("fsk", str(buffers.wp_device), grid, flat.tobytes(), np.asarray(freqs_hz).tobytes(), tuple(pair), three,
-           tx_m.tobytes(), rx_m.tobytes(), float(prior_m), float(keep_ratio), bool(first_only))
+    key = ("fsk", str(buffers.wp_device), grid, np.packbits(pixels).tobytes(), np.asarray(freqs_hz).tobytes(),
+           tuple(pair), three, tx_m.tobytes(), rx_m.tobytes(), float(prior_m), float(keep_ratio), bool(first_only))
     if key not in _GRAPHS:
-        _GRAPHS[key] = FskGraph(buffers, grid, flat, np.asarray(freqs_hz, dtype=np.float64), list(pair), three,
-                                tx_m, rx_m, prior_m, keep_ratio, first_only)
+        _GRAPHS[key] = FskGraph(buffers, grid, np.flatnonzero(pixels), np.asarray(freqs_hz, dtype=np.float64),
+                                list(pair), three, tx_m, rx_m, prior_m, keep_ratio, first_only)
         while len(_GRAPHS) > GRAPHS_KEPT:
             _GRAPHS.pop(next(iter(_GRAPHS)))
     return _GRAPHS[key]

@@ -43,7 +43,7 @@ def fsk_depth_at_prior(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.
     mean = (c1 + c2) * wp.float32(0.5)
     mag = wp.length(mean)
     maps[1, p] = wp.float64(mag)
-    wp.atomic_max(peak, 0, mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
 
 
 @wp.kernel(enable_backward=False)
@@ -81,7 +81,7 @@ def points_at_depth(pixel: wp.array(dtype=wp.int32), n_cols: int, x_m: wp.array(
 def first_magnitude_peak(ph: wp.array2d(dtype=wp.vec2f), peak: wp.array(dtype=wp.float32)):
     """peak[0] = max_i |ph[0, i]| (zeroed before)."""
     i = wp.tid()
-    wp.atomic_max(peak, 0, wp.length(ph[0, i]))
+    wp.atomic_max(peak, i % peak.shape[0], wp.length(ph[0, i]))
 
 
 @wp.kernel(enable_backward=False)
@@ -122,7 +122,7 @@ def pair_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), 
     if first_only != 0:
         mag = wp.length(c1)
     maps[1, p] = wp.float64(mag)
-    wp.atomic_max(peak, 0, mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
 
 
 @wp.kernel(enable_backward=False)
@@ -154,7 +154,7 @@ def slope_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
     maps[0, p] = points[i][2] - m_per_rad_hz * slope
     mag = wp.length((ph[0, i] + ph[1, i] + c3) / wp.float32(3.0))
     maps[1, p] = wp.float64(mag)
-    wp.atomic_max(peak, 0, mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
 
 
 @wp.kernel(enable_backward=False)
@@ -173,7 +173,7 @@ def depth_at_prior_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype
     maps[0, p] = maps[2, p] - m_per_rad * wp.float64(wp.atan2(im, re))
     mag = wp.length((c1 + c2) * wp.float32(0.5))
     maps[1, p] = wp.float64(mag)
-    wp.atomic_max(peak, 0, mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
 
 
 @wp.kernel(enable_backward=False)
@@ -188,3 +188,13 @@ def magnitude_filter_counted(pixel: wp.array(dtype=wp.int32), count: wp.array(dt
     mag = maps[1, p]
     if mag <= wp.float64(0.0) or mag < wp.float64(peak[0]) * keep_ratio:
         maps[0, p] = wp.float64(wp.nan)
+
+
+@wp.kernel(enable_backward=False)
+def reduce_peak(shards: wp.array(dtype=wp.float32), peak: wp.array(dtype=wp.float32)):
+    """peak[0] = max of the shards: the kernels above take the maximum into shards[i % n_shards] (a float atomic
+    max is a compare-and-swap loop; 90 k threads on one address cost ~0.1 ms on the H100), one thread combines."""
+    m = wp.float32(0.0)
+    for s in range(shards.shape[0]):
+        m = wp.max(m, shards[s])
+    peak[0] = m
