@@ -94,7 +94,8 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
         prep_args = [flag, points, x, y, z, inputs.cycles, pts, common]
         if not wp.get_device(dev).is_cpu:    # (tx halves need real blocks: Warp-CPU runs block_dim 1: rx product)
             tc_kernel, n_tile = kernels.correlate_tiles_tx_halves, int(kernels.TC2_POINTS)
-            tc_args = [pts, rx4, tx4, inputs.k, gain, inputs.tx_half_tables(), common, int(sum_freqs), out]
+            every = buffers.constant("count.all", lambda: wp.array([2**31 - 1], dtype=wp.int32, device=dev))
+            tc_args = [pts, rx4, tx4, inputs.k, gain, inputs.tx_half_tables(), common, int(sum_freqs), out, every]
         else:
             tc_kernel, n_tile = kernels.correlate_tiles_rx_product, int(kernels.TC_POINTS)
             tc_args = [pts, rx4, tx4, inputs.k, gain, mat, common, int(sum_freqs), out]

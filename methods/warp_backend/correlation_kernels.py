@@ -239,15 +239,18 @@ TC2_NP = wp.constant(136)          # N padded: TC2_POINTS + TC2_PAD (columns of 
 def correlate_tiles_tx_halves(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: wp.array(dtype=wp.vec4f),
                               k_rad_per_m: wp.array(dtype=wp.float32), gain: wp.array(dtype=wp.float32),
                               mat_h: wp.array4d(dtype=wp.float16), common: wp.array2d(dtype=wp.vec2f), sum_freqs: int,
-                              out: wp.array2d(dtype=wp.vec2f)):
+                              out: wp.array2d(dtype=wp.vec2f), count: wp.array(dtype=wp.int32)):
     """Separable sum on the tensor cores (tc v2): the transposed product per Tx half, Y_h^T = M_h^T A^T (96 x 128,
     fp32 accumulation), with M_h^T = rows [Re | Im] of the Tx half h (96 x 192 fp16, `FrameInputs.tx_half_tables`)
     and A^T = [cos; sin](k e_rx) (192 x 128 fp16), so that shared memory is A^T + M_h^T + Y_h^T. K and N are padded
     by 8 (zero K rows, unused N columns). The Tx dot runs per thread from the (point-contiguous) Y_h^T columns:
     thread lane takes point lane % 128 and every TC2_GROUPS-th Tx of the half, then `wp.tile` +
-    `tile_sum(axis=0)` combine the partial sums."""
+    `tile_sum(axis=0)` combine the partial sums. Blocks from point count[0] on return at once (a launch of fixed
+    size in a CUDA graph: the whole block takes the same branch)."""
     blk, lane = wp.tid()
     i0 = blk * TC2_POINTS
+    if i0 >= count[0]:
+        return
     pt = lane % TC2_POINTS
     grp = lane // TC2_POINTS
     p = wp.tile_load(pts, shape=TC2_POINTS, offset=i0, storage="shared")

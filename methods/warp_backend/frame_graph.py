@@ -6,8 +6,8 @@ The launches are those of the step-by-step device path (`warp_backend.prior.real
 'scanline', then `warp_backend.fsk.depth_at_prior`), on buffers allocated once per setting (depth image size,
 grid, camera, transform, frequencies, antennas, filter threshold: `graph_key`) so that their addresses stay
 fixed, and with launch sizes that do not depend on the frame: the covered pixels are compacted into slots as
-before and every later kernel runs over all ny * nx slots, threads past the count doing nothing (the correlation
-computes the unused slots too: ~0.05 ms more on the H100, less than one host round trip). A new frame's samples,
+before and every later kernel runs over all ny * nx slots, threads (and the correlation's blocks) past the count
+returning at once, so the count never goes to the host before the end. A new frame's samples,
 depth image and mask are copied into pinned staging buffers on the host; the graph's first nodes copy them to the
 device. Warp-CPU has no graphs: there `run` issues the same launches (the correlation with the separable kernel,
 Warp-CPU's default), which is how the tests compare this path with the step-by-step one without a GPU.
@@ -58,6 +58,7 @@ class GraphCorrelator:
         self.rx4 = wp.array(antennas4(rx_m, int(ck.TC_ANT)), dtype=wp.vec4f, device=dev)
         self.tx4 = wp.array(antennas4(tx_m, int(ck.TC_ANT)), dtype=wp.vec4f, device=dev)
         self.scale = wp.float32(1.0 / (n_rx * n_tx))
+        self.every = wp.array([2**31 - 1], dtype=wp.int32, device=dev)
 
     def load(self, signal: np.ndarray) -> None:
         """Stage a frame's samples (n_rx, n_tx, F) for the next run."""
@@ -74,8 +75,9 @@ class GraphCorrelator:
         wp.launch(table_kernels.tx_half_table, dim=self.mat_h.shape,
                   inputs=[self.raw, self.scale, self.gain_raw, self.gain, self.mat_h], device=dev)
 
-    def enqueue(self, points: wp.array) -> wp.array:
-        """Phasors (F, n) of the n points into `out`."""
+    def enqueue(self, points: wp.array, count: wp.array | None = None) -> wp.array:
+        """Phasors (F, n) of the n points into `out`; with `count` (device int32) only of the first count[0]
+        (the tensor-core blocks past it return at once; Warp-CPU computes them all)."""
         dev, n = self.device, points.shape[0]
         empty = wp.empty(0, dtype=wp.float64, device=dev)
         if dev.is_cpu:
@@ -89,8 +91,8 @@ class GraphCorrelator:
                                                     self.common], device=dev)
         n_blocks = (n + int(ck.TC2_POINTS) - 1) // int(ck.TC2_POINTS)
         wp.launch_tiled(ck.correlate_tiles_tx_halves, dim=[n_blocks],
-                        inputs=[self.pts, self.rx4, self.tx4, self.k, self.gain, self.mat_h, self.common, 0, self.out],
-                        block_dim=ck.TC_BLOCK, device=dev)
+                        inputs=[self.pts, self.rx4, self.tx4, self.k, self.gain, self.mat_h, self.common, 0, self.out,
+                                self.every if count is None else count], block_dim=ck.TC_BLOCK, device=dev)
         return self.out
 
 
@@ -156,7 +158,7 @@ class FrameGraph:
         wp.launch(fsk_kernels.compact_covered_pixels, dim=n_px,
                   inputs=[nx, self.filled, self.x_m, self.y_m, self.slot, self.points, self.pixel, self.maps],
                   device=dev)
-        ph = self.correlator.enqueue(self.points)
+        ph = self.correlator.enqueue(self.points, self.slot)
         wp.launch(fsk_kernels.depth_at_prior_counted, dim=n_px,
                   inputs=[ph, self.pixel, self.slot, self.m_per_rad, self.maps, self.shards], device=dev)
         wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
