@@ -1,58 +1,94 @@
 #!/usr/bin/env bash
-# Every GPU figure of notes/gpu.md (round 9) on the device machine, in four calls of the `run` tool (a call carries
-# at most 64 MiB: the Warp wheel and the 8 catalogue captures travel in quarters). Here, once:
-#   bash bench/device_figures.sh pack [ROOT]       # ROOT: dataset root (default data/synthetic, 30 cm captures)
-# then on the device, back to back (each `carry` names one folder):
-#   carry [".gpu0"]: bash bench/device_figures.sh part 0
-#   carry [".gpu1"]: bash bench/device_figures.sh part 1
-#   carry [".gpu2"]: bash bench/device_figures.sh part 2
-#   carry [".gpu3"]: bash bench/device_figures.sh measure      # ~3-4 min: CUDA tests, then bench.perf_skips_gpu
-# `measure` installs Warp, runs the CUDA tests of the GPU code and `python -m bench.perf_skips_gpu` on the 8
-# captures (new frames, roi=auto beside roi=none, median and p90), and leaves the CSV and logs under $OUT.
+# Every GPU figure of notes/gpu.md round 10 on the device machine, in ten calls of the `run` tool, back to back
+# (a call carries at most 64 MiB: the wheels and the data travel in parts). Here, once:
+#   [SEQ=CAPTURE] bash bench/device_figures.sh pack [ROOT]   # ROOT: the 30 cm catalogue (default data/synthetic);
+#                    # SEQ: a sequence capture (default: bench.perf_stream's bottle sequence, generated if missing)
+# then on the device (each line: the `carry` list, then the command):
+#   [".wp0"]           bash bench/device_figures.sh part .wp0
+#   [".wp1"]           bash bench/device_figures.sh part .wp1
+#   [".wp2", ".whl"]   bash bench/device_figures.sh part .wp2
+#   [".o3d0"]          bash bench/device_figures.sh part .o3d0
+#   [".o3d1", ".gl"]   bash bench/device_figures.sh part .o3d1
+#   [".gpud0"]         bash bench/device_figures.sh part .gpud0
+#   [".gpud1"]         bash bench/device_figures.sh part .gpud1
+#   [".gpus0"]         bash bench/device_figures.sh part .gpus0
+#   [".gpus1"]         bash bench/device_figures.sh part .gpus1
+#   [".gpus2"]         bash bench/device_figures.sh measure       # ~6 min; figures and logs come back in $OUT
+# `measure` installs Warp, Open3D and Hydra, runs the CUDA tests, bench.perf_frames (new frames of the masked
+# objects, both prior fills), bench.perf_stream on the sequence, the table3 experiment end to end twice (the first
+# compiles the kernels; the second is the warm-cache figure) and bench.perf_overhead, all with --device cuda.
 set -euo pipefail
 root=$(git rev-parse --show-toplevel 2>/dev/null || pwd); cd "$root"
+capture_files() {   # capture folder $1 -> $2: what the methods and metrics read (radar frames $3, no RGB)
+  local c=$1 t=$2 frames=$3
+  mkdir -p "$t/radar_72.0_82.0_128/calibrated_data" "$t/realsense" "$t/photogrammetry"
+  cp "$c"/alignment.json "$c"/metadata.json "$t/"
+  cp "$c"/radar_72.0_82.0_128/calibration.json "$t/radar_72.0_82.0_128/"
+  for f in $frames; do cp "$c/radar_72.0_82.0_128/calibrated_data/$f.npy" "$t/radar_72.0_82.0_128/calibrated_data/"; done
+  cp -r "$c"/realsense/depth "$c"/realsense/mask "$c"/realsense/calibration.json "$c"/realsense/timestamps.txt \
+    "$t/realsense/"
+  cp "$c"/photogrammetry/*.obj "$t/photogrammetry/"
+  [ -f "$c/photogrammetry/cams.xml" ] && cp "$c/photogrammetry/cams.xml" "$t/photogrammetry/"
+  [ -d "$c/photogrammetry/poses" ] && cp -r "$c/photogrammetry/poses" "$t/photogrammetry/"
+  return 0
+}
 case "${1:-}" in
   pack)
     data=${2:-data/synthetic}
     exclude="$(git rev-parse --git-dir)/info/exclude"
-    tmp=$(mktemp -d)
-    python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
-      --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 -d "$tmp" "warp-lang==${WARP_VERSION:-1.19.0}"
-    whl=$(basename "$tmp"/warp_lang-*.whl)
-    (cd "$tmp" && split -n 4 -d "$whl" part_)
-    mapfile -t captures < <(find "$data" -mindepth 2 -maxdepth 2 -type d -name 30 | sort)
-    for i in 0 1 2 3; do
-      d=.gpu$i
-      grep -qx "/$d/" "$exclude" 2>/dev/null || echo "/$d/" >> "$exclude"
-      rm -rf "$d"; mkdir -p "$d/data"; mv "$tmp/part_0$i" "$d/"; echo "$whl" > "$d/WHEEL_NAME"
-      for c in "${captures[@]:$((2 * i)):2}"; do       # radar frame 0 + RealSense parts: what the methods read
-        t="$d/data/$(basename "$(dirname "$c")")/30"
-        mkdir -p "$t/radar_72.0_82.0_128/calibrated_data" "$t/realsense/depth" "$t/realsense/mask"
-        cp "$c"/alignment.json "$c"/metadata.json "$t/"
-        cp "$c"/radar_72.0_82.0_128/calibration.json "$t/radar_72.0_82.0_128/"
-        cp "$c"/radar_72.0_82.0_128/calibrated_data/000000.npy "$t/radar_72.0_82.0_128/calibrated_data/"
-        cp "$c"/realsense/calibration.json "$c"/realsense/timestamps.txt "$t/realsense/"
-        cp "$c"/realsense/depth/000000.png "$t/realsense/depth/"
-        cp "$c"/realsense/mask/000000.png "$t/realsense/mask/"
-      done
+    [ -d .wp0 ] && [ -d .o3d0 ] || bash ../shared/tools/device-parts.sh
+    for d in .gpud0 .gpud1 .gpus0 .gpus1 .gpus2; do
+      grep -qx "/$d/" "$exclude" 2>/dev/null || echo "/$d/" >> "$exclude"; rm -rf "$d"; mkdir -p "$d"
     done
-    rm -rf "$tmp"; du -sh .gpu0 .gpu1 .gpu2 .gpu3 ;;
+    mapfile -t captures < <(find "$data" -mindepth 2 -maxdepth 2 -type d -name 30 | sort)
+    for i in "${!captures[@]}"; do
+      c=${captures[$i]}
+      capture_files "$c" ".gpud$((i / 4))/cat/$(basename "$(dirname "$c")")/30" 000000
+    done
+    seq=${SEQ:-$(.venv/bin/python -c "from bench.perf_stream import default_sequence; print(default_sequence())")}
+    capture_files "$seq" .gpus0/seq/04_bottle/30 "000000 000001 000002 000003"
+    for part in "[4-7] .gpus1" "[8-9] .gpus2"; do      # the other radar frames
+      set -- $part; frames="$2/seq/04_bottle/30/radar_72.0_82.0_128/calibrated_data"
+      mkdir -p "$frames"; cp "$seq"/radar_72.0_82.0_128/calibrated_data/00000$1.npy "$frames/"
+    done
+    du -sh .gpud0 .gpud1 .gpus0 .gpus1 .gpus2 ;;
   part)
     mkdir -p /root/parts /root/data
-    cp ".gpu$2"/part_* /root/parts/ && cp -r ".gpu$2"/data/* /root/data/ && ls /root/data ;;
+    case "$2" in
+      .gpud*|.gpus*) cp -r "$2"/* /root/data/ ;;
+      *) cp "$2"/*_0* /root/parts/ 2>/dev/null || true; cp "$2"/WHEEL_NAME "/root/parts/$2.name" 2>/dev/null || true
+         [ "$2" = .wp2 ] && cp .whl/*.whl /root/parts/
+         [ "$2" = .o3d1 ] && cp -r .gl /root/gl ;;
+    esac
+    ls /root/parts /root/data ;;
   measure)
-    cp .gpu3/part_* /root/parts/ && cp -r .gpu3/data/* /root/data/
-    cat /root/parts/part_* > "/tmp/$(cat .gpu3/WHEEL_NAME)"
-    python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site "/tmp/$(cat .gpu3/WHEEL_NAME)"
-    export PYTHONPATH=/tmp/site PYTHONUNBUFFERED=1 WARP_CACHE_PATH=/root/wpcache
+    cp -r .gpus2/* /root/data/
+    cat /root/parts/wp_* > "/tmp/$(cat /root/parts/.wp2.name)"
+    cat /root/parts/o3d_* > "/tmp/$(cat /root/parts/.o3d1.name)"
+    python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site "/tmp/$(cat /root/parts/.wp2.name)" \
+      "/tmp/$(cat /root/parts/.o3d1.name)" /root/parts/*.whl
+    for f in /root/gl/*.deb; do dpkg -x "$f" /; done; ldconfig
+    export PYTHONPATH=/tmp/site:/root/gl/stubs:$PWD PYTHONUNBUFFERED=1 WARP_CACHE_PATH=/root/wpcache
+    python3 -m pip install -q --no-deps --no-index --no-build-isolation -e . >/dev/null 2>&1 || true
     out=${OUT:-/tmp/out}; mkdir -p "$out"
     noise='^Module|^Warp|CUDA Toolkit|Devices:|"cpu"|"cuda:0"|Kernel cache'
     nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee "$out/device.txt"
-    python3 -m pytest -q -p no:cacheprovider -m cuda tests/test_gpu_hull_fill.py tests/test_gpu_range_points.py \
-      tests/test_gpu_prior_depth.py tests/test_correlate.py tests/test_methods_api.py 2>&1 | tail -5 | tee "$out/tests.log" \
-      || true                                                # a failing test is reported; the figures still run
-    python3 -m bench.perf_skips_gpu --root /root/data --device cuda --repeat "${REPEAT:-5}" --out "$out" 2>&1 \
-      | grep -Ev "$noise" | tee "$out/perf_skips_gpu.log" ;;
+    python3 -m pytest -q -p no:cacheprovider -m cuda tests/test_gpu_frame_graph.py tests/test_gpu_fsk.py \
+      tests/test_gpu_tables.py tests/test_gpu_hull_fill.py tests/test_gpu_prior_depth.py tests/test_gpu_range_points.py \
+      tests/test_correlate.py tests/test_methods_api.py tests/test_methods_conformance.py tests/test_methods_skips.py \
+      2>&1 | tail -5 | tee "$out/tests.log" || true           # a failing test is reported; the figures still run
+    python3 -m bench.perf_frames --device cuda --repeat "${REPEAT:-24}" --fill scanline delaunay --out "$out" 2>&1 \
+      | grep -Ev "$noise" | tee "$out/perf_frames.log"
+    python3 -m bench.perf_stream --device cuda --root /root/data/seq --capture 04_bottle/30 --passes 3 --out "$out" \
+      2>&1 | grep -Ev "$noise" | tee "$out/perf_stream.log"
+    for run in cold warm; do
+      start=$(date +%s%N)
+      python3 -m bench -m experiment=table3 device=cuda hydra/launcher=basic dataset.root=/root/data/cat \
+        store.dir=null hydra.sweep.dir=/tmp/table3_$run 2>&1 | grep -Ev "$noise" | tail -16
+      echo "table3 $run: $(( ($(date +%s%N) - start) / 1000000 )) ms end to end"
+    done 2>&1 | tee "$out/table3.log"
+    python3 -m bench.perf_overhead --root /root/data/cat --device cuda --out "$out" 2>&1 | grep -Ev "$noise" \
+      | tail -20 | tee "$out/perf_overhead.log" ;;
   *)
-    echo "usage: bash bench/device_figures.sh pack [ROOT] | part 0|1|2 | measure" >&2; exit 2 ;;
+    echo "usage: bash bench/device_figures.sh pack [ROOT] | part FOLDER | measure" >&2; exit 2 ;;
 esac
