@@ -121,6 +121,11 @@ README_RUNS: dict[str, list[str]] = {
     ".venv/bin/python -m bench.perf [--device cpu|cuda] [--sizes paper|small]": ["{py} -m bench.perf --help"],
     ".venv/bin/python -m bench.perf_frames [--device cpu|cuda] [--scene masked|plate] [--root DIR]":
         ["{py} -m bench.perf_frames --help"],          # minutes on the CPU; its parts run in test_perf_frames
+    ".venv/bin/python -m bench.perf_frames --device cuda --fill scanline delaunay":
+        ["{py} -m bench.perf_frames --help"],          # needs a GPU; its parts run in test_perf_frames
+    ".venv/bin/python -m bench.perf_fill --root data/synthetic":
+        ["{py} -m bench.perf_fill --help"],            # minutes on the CPU; its parts run in test_perf_fill
+    "python -m bench.perf_fill --root DIR": ["{py} -m bench.perf_fill --help"],
     ".venv/bin/python -m bench.perf_stream [--device cpu|cuda] [--root DIR --capture OBJECT/DISTANCE]":
         ["{py} -m bench.perf_stream --help"],          # generates a 10-frame sequence; runs in test_perf_stream
     ".venv/bin/python -m bench.perf_overhead --root data/synthetic [--device cpu|cuda] [--grid paper]":
