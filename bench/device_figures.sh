@@ -62,6 +62,7 @@ case "${1:-}" in
     esac
     ls /root/parts /root/data ;;
   measure)
+    set +e +o pipefail                             # a failing step is logged; the next ones still run
     cp -r .gpus2/* /root/data/
     cat /root/parts/wp_* > "/tmp/$(cat /root/parts/.wp2.name)"
     cat /root/parts/o3d_* > "/tmp/$(cat /root/parts/.o3d1.name)"
@@ -72,23 +73,26 @@ case "${1:-}" in
     python3 -m pip install -q --no-deps --no-index --no-build-isolation -e . >/dev/null 2>&1 || true
     out=${OUT:-/tmp/out}; mkdir -p "$out"
     noise='^Module|^Warp|CUDA Toolkit|Devices:|"cpu"|"cuda:0"|Kernel cache'
-    nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee "$out/device.txt"
+    log="$out/measure.log"                         # one log: at most 8 files come back from the device
+    nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee "$log"
     python3 -m pytest -q -p no:cacheprovider -m cuda tests/test_gpu_frame_graph.py tests/test_gpu_fsk.py \
       tests/test_gpu_tables.py tests/test_gpu_hull_fill.py tests/test_gpu_prior_depth.py tests/test_gpu_range_points.py \
       tests/test_correlate.py tests/test_methods_api.py tests/test_methods_conformance.py tests/test_methods_skips.py \
-      2>&1 | tail -5 | tee "$out/tests.log" || true           # a failing test is reported; the figures still run
+      2>&1 | tail -5 | tee -a "$log" || true                 # a failing test is reported; the figures still run
     python3 -m bench.perf_frames --device cuda --repeat "${REPEAT:-24}" --fill scanline delaunay --out "$out" 2>&1 \
-      | grep -Ev "$noise" | tee "$out/perf_frames.log"
+      | grep -Ev "$noise" | tee -a "$log"
+    python3 -m bench.perf_frames --device cuda --repeat "${REPEAT:-24}" --root /root/data/cat --out "$out/catalogue" \
+      --cases mm2fsk:d10:realsense 2fsk:d05:none 3fsk:d05_d10:none 2>&1 | grep -Ev "$noise" | tee -a "$log"
     python3 -m bench.perf_stream --device cuda --root /root/data/seq --capture 04_bottle/30 --passes 3 --out "$out" \
-      2>&1 | grep -Ev "$noise" | tee "$out/perf_stream.log"
+      2>&1 | grep -Ev "$noise" | tee -a "$log"
     for run in cold warm; do
       start=$(date +%s%N)
       python3 -m bench -m experiment=table3 device=cuda hydra/launcher=basic dataset.root=/root/data/cat \
         store.dir=null hydra.sweep.dir=/tmp/table3_$run 2>&1 | grep -Ev "$noise" | tail -16
       echo "table3 $run: $(( ($(date +%s%N) - start) / 1000000 )) ms end to end"
-    done 2>&1 | tee "$out/table3.log"
+    done 2>&1 | tee -a "$log"
     python3 -m bench.perf_overhead --root /root/data/cat --device cuda --out "$out" 2>&1 | grep -Ev "$noise" \
-      | tail -20 | tee "$out/perf_overhead.log" ;;
+      | tail -20 | tee -a "$log" ;;
   *)
     echo "usage: bash bench/device_figures.sh pack [ROOT] | part FOLDER | measure" >&2; exit 2 ;;
 esac
