@@ -16,10 +16,8 @@
 from __future__ import annotations
 
 import argparse
-import collections
 import itertools
 import shutil
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -29,6 +27,7 @@ from omegaconf import OmegaConf
 
 from bench import agreement, cli, tables
 from bench.app import CONFIG_DIR
+from bench.progress import run_relayed
 
 EXPERIMENTS = ("table2", "table3")
 REPORT_FILES = ("{table}.md", "{table}.csv", "{table}.tex", "runtime_vs_error.png")
@@ -101,13 +100,9 @@ def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "rea
                *QUIET]
     print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
     shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells
-    proc = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
-    tail = collections.deque(maxlen=40)
-    for line in proc.stderr:
-        sys.stderr.write(line)
-        tail.append(line.rstrip())
-    if proc.wait() != 0:
-        raise SweepFailed(f"the {experiment} sweep failed (exit {proc.returncode}): {_reason(list(tail))}"
+    returncode, tail = run_relayed(command)     # on a terminal, with the jobs' progress bars (bench.progress)
+    if returncode != 0:
+        raise SweepFailed(f"the {experiment} sweep failed (exit {returncode}): {_reason(tail)}"
                           f"; job logs: {out / experiment}/*/app.log")
     return pd.read_csv(out / experiment / "results.csv")
 

@@ -5,8 +5,17 @@ SLURM job files get the plain progress lines instead.
 (tqdm.write), so a command's own result lines stay whole lines and the bar stays at the bottom."""
 from __future__ import annotations
 
+import codecs
+import collections
 import contextlib
+import fcntl
+import os
+import pty
+import shutil
+import struct
+import subprocess
 import sys
+import termios
 from collections.abc import Iterable, Iterator
 from typing import TypeVar
 
@@ -75,6 +84,44 @@ def each(items: Iterable[T], description: str, unit: str = "step", enabled: bool
         for item in items:
             yield item
             progress.update()
+
+
+def run_relayed(command: list[str], tail_lines: int = 40, terminal: bool | None = None) -> tuple[int, list[str]]:
+    """Run `command`, passing its stderr on and keeping its last `tail_lines` lines (for its error message): its
+    exit code and those lines. With `terminal` (default: when stdout and stderr are both one), the command gets a
+    pseudo-terminal for both, sized as ours, so its own progress bars are drawn, and what it writes is relayed to
+    our stdout as it comes; otherwise its stderr is a pipe read line by line (no bars) and its stdout ours."""
+    tail = collections.deque(maxlen=tail_lines)
+    if terminal is None:
+        terminal = sys.stdout.isatty() and sys.stderr.isatty()
+    if not terminal:
+        proc = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
+        for line in proc.stderr:
+            sys.stderr.write(line)
+            tail.append(line.rstrip())
+        return proc.wait(), list(tail)
+    main_fd, sub_fd = pty.openpty()
+    columns, lines = shutil.get_terminal_size()           # ours, so its bars fit (a new pty is 0 columns wide)
+    fcntl.ioctl(sub_fd, termios.TIOCSWINSZ, struct.pack("HHHH", lines, columns, 0, 0))
+    proc = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=sub_fd, stderr=sub_fd)
+    os.close(sub_fd)
+    decoder, pending = codecs.getincrementaldecoder("utf-8")(errors="replace"), ""
+    try:
+        while True:
+            try:
+                chunk = os.read(main_fd, 65536)
+            except OSError:                     # EIO: the command closed the terminal
+                break
+            if not chunk:
+                break
+            text = decoder.decode(chunk)
+            sys.stdout.write(text)
+            sys.stdout.flush()
+            *lines, pending = (pending + text).split("\n")
+            tail.extend(line.rstrip("\r").split("\r")[-1].rstrip() for line in lines)   # what the screen shows
+    finally:
+        os.close(main_fd)
+    return proc.wait(), list(tail)
 
 
 def on_terminal() -> bool:

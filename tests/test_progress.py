@@ -111,3 +111,28 @@ def test_perf_command_bar(synth_root, tmp_path, captured):
     assert code == 0, raw
     assert bool(BAR.search(raw)) != captured and ("cases:" in raw) != captured, raw
     assert any(line.startswith("mm2fsk_d10    auto  median") for line in _lines(raw)), raw
+
+
+CHILD = """
+import os, sys
+from bench.progress import each
+print("tty", os.isatty(1), os.isatty(2), flush=True)
+for i in each(range(2), "child steps", unit="item"):
+    print(f"result {i}", flush=True)
+print("error: data/x: broken", file=sys.stderr)
+sys.exit(2)
+"""
+
+
+@pytest.mark.parametrize("terminal", [True, False], ids=["terminal", "pipe"])
+def test_run_relayed_keeps_the_error_line_and_draws_bars_only_on_a_terminal(capfd, terminal):
+    from bench.progress import run_relayed
+
+    code, tail = run_relayed([sys.executable, "-c", CHILD], terminal=terminal)
+    relayed = capfd.readouterr()
+    assert code == 2 and tail[-1] == "error: data/x: broken", tail
+    if terminal:           # one pseudo-terminal for both, relayed to our stdout: the child draws its bar
+        assert "tty True True" in tail and "result 1" in tail
+        assert "child steps" in relayed.out and BAR.search(relayed.out), relayed.out
+    else:                  # stderr piped (no bar), stdout the child's own
+        assert "child steps" not in relayed.out + relayed.err and relayed.out.split()[2] == "False"    # stderr
