@@ -154,8 +154,10 @@ class Backend:
         raise NotImplementedError(f"{type(self).__name__} runs 3FSK on the host")
 
     def depth_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, prior: Prior,
-                       threshold_db: float | None, timer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Two-frequency depth at a device-resident prior, where it lives: (depth_m, magnitude, prior_m) (ny, nx)."""
+                       threshold_db: float | None, timer, roi_pixels: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Two-frequency depth at a device-resident prior, where it lives: (depth_m, magnitude, prior_m) (ny, nx);
+        `roi_pixels` (ny, nx) bool restricts the correlated pixels where `prior.takes_roi`."""
         raise NotImplementedError(f"{type(self).__name__} holds no device-resident priors")
 
     def warm_up(self, signal, freqs_hz, tx_m, rx_m, *, volume: bool, prior: bool) -> None:

@@ -34,8 +34,9 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
 
     Pass the `timer` that already timed the prior so that `total` includes it. `roi` (None = the whole grid)
     bounds the pixels correlated and the depths kept. A device-resident prior stays on its backend's device unless
-    the ROI cuts pixels (the host path restricts them) or the filter quantity is not the default 'mean'
-    (`fsk.filter_magnitude`; the device kernels compute that one).
+    the ROI cuts pixels and the prior cannot restrict them itself (`Prior.takes_roi`: the frame graph can; else the
+    host path restricts them) or the filter quantity is not the default 'mean' (`fsk.filter_magnitude`; the device
+    kernels compute that one).
     """
     if filter_quantity not in FILTER_QUANTITIES:
         raise ValueError(f"unknown filter_quantity {filter_quantity!r}; choose one of {', '.join(FILTER_QUANTITIES)}")
@@ -50,15 +51,18 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
         roi = None                                   # the whole grid: nothing to restrict
     timer = timer or StageTimer()
     sources = (() if roi is None else roi.sources) + ("prior",)
-    if prior.device_resident and (roi is None or roi.pixels.all()) and filter_quantity == "mean":
+    roi_cut = roi is not None and not roi.pixels.all()
+    if prior.device_resident and (not roi_cut or prior.takes_roi) and filter_quantity == "mean":
         depth_m, magnitude, prior_m = backend.depth_at_prior(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid,
-                                                             prior, threshold_db, timer)
-        if roi is not None:                          # a depth interval only: drop depths outside it
+                                                             prior, threshold_db, timer,
+                                                             roi.pixels if roi_cut else None)
+        if roi is not None:                          # the ROI's depth interval: drop depths outside it
             depth_m = roi_depth_m(depth_m, roi)
+        used = prior.n_used if roi_cut else prior.n_covered
         return Reconstruction(depth_m=depth_m, magnitude=magnitude, freqs_hz=np.asarray(freqs_hz),
                               timings_ms=timer.finish(), grid=grid, method="mm2fsk",
-                              extra={"prior_depth_m": prior_m, "prior_pixels": prior.n_covered,
-                                     "roi_px": prior.n_covered, "roi_sources": sources})
+                              extra={"prior_depth_m": prior_m, "prior_pixels": used, "roi_px": used,
+                                     "roi_sources": sources})
     prior_depth_m = prior.host_m()
     has_prior = np.isfinite(prior_depth_m) if roi is None else np.isfinite(prior_depth_m) & roi.pixels
     x_m, y_m = grid.pixel_xy_m()

@@ -15,6 +15,7 @@ class Prior:
     n_covered: int
     shape: tuple[int, int]
     device_resident = False
+    takes_roi = False       # `Backend.depth_at_prior` restricts its pixels to a region of interest itself
 
     def host_m(self) -> np.ndarray:
         raise NotImplementedError

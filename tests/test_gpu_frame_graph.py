@@ -41,8 +41,8 @@ def test_frame_graph_equals_the_step_by_step_device_path(device):
             keep_ratio, StageTimer())
         graph = frame_graph(backend.buffers, frame, cam2radar, grid, 10.0, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m,
                             keep_ratio)
-        depth_m, magnitude, prior_m, n_covered = graph.run(frame, signal)
-        assert n_covered == step.n_covered > 100
+        depth_m, magnitude, prior_m, n_covered, n_used = graph.run(frame, signal)
+        assert n_covered == n_used == step.n_covered > 100
         for got, want in zip((depth_m, magnitude, prior_m), expected):
             assert np.array_equal(np.isfinite(got), np.isfinite(want))
             assert np.max(np.abs(got - want), where=np.isfinite(want), initial=0.0) < 1e-12
@@ -85,3 +85,45 @@ def test_fsk_graph_equals_the_step_by_step_device_path(device, freq):
     for got, want in zip(maps, expected):
         assert np.array_equal(np.isfinite(got), np.isfinite(want))
         assert np.max(np.abs(got - want), where=np.isfinite(want), initial=0.0) < 1e-12
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_frame_graph_restricts_to_the_roi_as_the_host_path_does(device):
+    """A mask_bb-like region of interest: the graph correlates only the prior's pixels inside it and filters
+    relative to their maximum, as MM-2FSK's host path does with the same prior image and backend."""
+    from methods.backend import backend_for
+    from methods.mm2fsk import reconstruct_mm2fsk
+    from methods.prior_image import HostPrior
+    from methods.roi import Roi
+    from methods.warp_backend.prior import DeferredPrior
+
+    backend = backend_for(device)
+    rng = np.random.default_rng()
+    cam2radar = realsense2radar()
+    grid = square_grid(0.05, 61)
+    freqs_hz = MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, "d10")]
+    rows, cols = np.mgrid[:CAMERA.height, :CAMERA.width]
+    z0 = rng.uniform(0.28, 0.34)
+    frame = plane_depth_frame(z0, 0.1, -0.1, cam2radar, mask=(cols - 320) ** 2 + (rows - 240) ** 2 < 150 ** 2)
+    points = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), np.full(40, z0)])
+    signal = simulate(points, np.exp(2j * np.pi * rng.random(40)), freqs_hz)
+    pixels = np.zeros(grid.image_shape, bool)
+    pixels[10:45, 5:40] = True
+    roi = Roi(pixels, 0.2, 0.5, ("mask_bb",))
+    deferred = DeferredPrior(backend.buffers, frame, cam2radar, grid, 10.0)
+    if device == "warp-cpu":            # Warp-CPU's backend builds host priors: run the graph path by hand
+        from methods.warp_backend.frame_graph import frame_graph
+        got_depth, got_mag, prior_m, n_covered, n_used = frame_graph(
+            backend.buffers, frame, cam2radar, grid, 10.0, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m,
+            10.0 ** (-14.0 / 20.0)).run(frame, signal, pixels)
+    else:
+        got = reconstruct_mm2fsk(signal, freqs_hz, ANTENNAS, grid, deferred, backend=backend, roi=roi)
+        got_depth, got_mag, prior_m = got.depth_m, got.magnitude, got.extra["prior_depth_m"]
+        n_used = got.extra["prior_pixels"]
+    expected = reconstruct_mm2fsk(signal, freqs_hz, ANTENNAS, grid, HostPrior(prior_m, grid), backend=backend,
+                                  roi=roi)
+    assert n_used == expected.extra["prior_pixels"] == (np.isfinite(prior_m) & pixels).sum() > 100
+    valid, reference = np.isfinite(got_depth), np.isfinite(expected.depth_m)
+    assert not valid[~pixels].any() and np.mean(valid != reference) <= 0.002
+    assert np.max(np.abs(got_depth - expected.depth_m)[valid & reference]) < 1e-6
+    assert np.array_equal(np.isfinite(got_mag), np.isfinite(expected.magnitude))

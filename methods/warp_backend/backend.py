@@ -115,7 +115,7 @@ class WarpBackend(Backend):
         return super().mesh_prior(mesh, photogrammetry2radar, grid, fill=fill)
 
     def depth_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid, prior: Prior,
-                       threshold_db: float | None = DEFAULT_THRESHOLD_DB, timer=None):
+                       threshold_db: float | None = DEFAULT_THRESHOLD_DB, timer=None, roi_pixels=None):
         if not prior.device_resident:
             raise ValueError("depth_at_prior needs a prior held on this backend's device")
         if threshold_db is not None and threshold_db < 0:
@@ -127,9 +127,11 @@ class WarpBackend(Backend):
             with timer.stage("correlate"):             # the prior, correlation, depth and filter: one graph
                 graph = frame_graph(self.buffers, prior.depth, prior.realsense2radar, grid, prior.max_jump_mm,
                                     freqs_hz, tx_m, rx_m, keep_ratio)
-                depth_m, magnitude, prior_m, n_covered = graph.run(prior.depth, signal)
-            prior.resolve(prior_m, n_covered)
+                depth_m, magnitude, prior_m, n_covered, n_used = graph.run(prior.depth, signal, roi_pixels)
+            prior.resolve(prior_m, n_covered, n_used)
             return depth_m, magnitude, prior_m
+        if roi_pixels is not None:
+            raise ValueError("only a pending DeferredPrior's frame graph restricts pixels to a region of interest")
         if isinstance(prior, DeferredPrior):
             prior = prior.materialise()
 

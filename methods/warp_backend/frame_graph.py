@@ -111,6 +111,9 @@ class FrameGraph:
                                   device="cpu", pinned=pinned)
         self.maps_host = wp.empty((3, n_px), dtype=wp.float64, device="cpu", pinned=pinned)
         self.stats_host = wp.empty(2, dtype=wp.int32, device="cpu", pinned=pinned)
+        self.slot_host = wp.empty(1, dtype=wp.int32, device="cpu", pinned=pinned)
+        self.roi_host = wp.empty(n_px, dtype=wp.uint8, device="cpu", pinned=pinned)
+        self.roi = wp.empty(n_px, dtype=wp.uint8, device=dev)
         self.d_img = wp.empty_like(self.depth_host, device=dev)
         self.m_img = wp.empty_like(self.mask_host, device=dev)
         self.zbuf = wp.empty(n_px, dtype=wp.float64, device=dev)
@@ -145,6 +148,7 @@ class FrameGraph:
         height, width = self.d_img.shape
         wp.copy(self.d_img, self.depth_host)
         wp.copy(self.m_img, self.mask_host)
+        wp.copy(self.roi, self.roi_host)
         self.correlator.enqueue_tables()
         self.slot.zero_()
         self.shards.zero_()
@@ -156,8 +160,8 @@ class FrameGraph:
         wp.launch(prior_kernels.scanline_fill, dim=n_px, inputs=[ny, nx, self.zbuf, self.stats, self.filled],
                   device=dev)
         wp.launch(fsk_kernels.compact_covered_pixels, dim=n_px,
-                  inputs=[nx, self.filled, self.x_m, self.y_m, self.slot, self.points, self.pixel, self.maps],
-                  device=dev)
+                  inputs=[nx, self.filled, self.x_m, self.y_m, self.slot, self.points, self.pixel, self.maps, 1,
+                          self.roi], device=dev)
         ph = self.correlator.enqueue(self.points, self.slot)
         wp.launch(fsk_kernels.depth_at_prior_counted, dim=n_px,
                   inputs=[ph, self.pixel, self.slot, self.m_per_rad, self.maps, self.shards], device=dev)
@@ -166,10 +170,14 @@ class FrameGraph:
                   inputs=[self.pixel, self.slot, self.keep_ratio, self.peak, self.maps], device=dev)
         wp.copy(self.maps_host, self.maps)
         wp.copy(self.stats_host, self.stats, count=2)
+        wp.copy(self.slot_host, self.slot)
 
-    def run(self, depth, signal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-        """(depth_m, magnitude, prior_m) (ny, nx) NaN where none, and the prior's covered pixels, of a new frame:
-        its depth frame (the setting's size) and two-frequency samples (n_rx, n_tx, 2)."""
+    def run(self, depth, signal: np.ndarray, roi_pixels: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+        """(depth_m, magnitude, prior_m) (ny, nx) NaN where none, the prior's covered pixels and those correlated
+        (inside `roi_pixels` (ny, nx) bool, None = all) of a new frame: its depth frame (the setting's size) and
+        two-frequency samples (n_rx, n_tx, 2)."""
+        np.copyto(self.roi_host.numpy(), 1 if roi_pixels is None else roi_pixels.ravel(), casting="unsafe")
         np.copyto(self.depth_host.numpy(), depth.depth_mm, casting="unsafe")
         if self.use_mask:
             np.copyto(self.mask_host.numpy(), depth.mask, casting="unsafe")
@@ -181,7 +189,7 @@ class FrameGraph:
         wp.synchronize_device(self.device)
         maps = self.maps_host.numpy().reshape(3, *self.shape).copy()
         n_covered, n_filled = (int(v) for v in self.stats_host.numpy())
-        return maps[0], maps[1], maps[2], n_covered + n_filled
+        return maps[0], maps[1], maps[2], n_covered + n_filled, int(self.slot_host.numpy()[0])
 
 
 def frame_graph(buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio) -> FrameGraph:

@@ -52,7 +52,8 @@ def depth_at_prior(buffers: BufferPool, correlate_points: Callable, signal, freq
         slot.zero_()
         peak.zero_()
         wp.launch(kernels.compact_covered_pixels, dim=ny * nx,
-                  inputs=[nx, prior.zbuf, x_m, y_m, slot, points, pixel, maps], device=dev)
+                  inputs=[nx, prior.zbuf, x_m, y_m, slot, points, pixel, maps, 0,
+                          buffers.get("fsk.no_roi", 1, wp.uint8)], device=dev)
         phasors = correlate_points(points[:n]) if n else None
         wp.synchronize_device(dev)
     with timer.stage("depth"):

@@ -13,8 +13,9 @@ from methods.warp_backend.prior_kernels import FAR
 def compact_covered_pixels(n_cols: int, zbuf: wp.array(dtype=wp.float64), x_m: wp.array(dtype=wp.float64),
                            y_m: wp.array(dtype=wp.float64), slot: wp.array(dtype=wp.int32),
                            points: wp.array(dtype=wp.vec3d), pixel: wp.array(dtype=wp.int32),
-                           maps: wp.array2d(dtype=wp.float64)):
-    """maps = (depth NaN, magnitude NaN, prior or NaN); covered pixels -> next slot of (x, y, prior) points."""
+                           maps: wp.array2d(dtype=wp.float64), use_roi: int, roi: wp.array(dtype=wp.uint8)):
+    """maps = (depth NaN, magnitude NaN, prior or NaN); covered pixels (inside the ROI `roi` with use_roi) -> next
+    slot of (x, y, prior) points."""
     p = wp.tid()
     z = zbuf[p]
     nan = wp.float64(wp.nan)
@@ -22,6 +23,8 @@ def compact_covered_pixels(n_cols: int, zbuf: wp.array(dtype=wp.float64), x_m: w
     maps[1, p] = nan
     if z < FAR:
         maps[2, p] = z
+        if use_roi != 0 and roi[p] == wp.uint8(0):
+            return
         i = wp.atomic_add(slot, 0, 1)
         points[i] = wp.vec3d(x_m[p % n_cols], y_m[p // n_cols], z)
         pixel[i] = p

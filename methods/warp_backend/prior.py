@@ -64,9 +64,15 @@ class DeferredPrior(Prior):
         """Neither built step by step nor computed by a frame graph yet."""
         return self._built is None and self._n is None
 
-    def resolve(self, host_m: np.ndarray, n_covered: int) -> None:
-        """Record what the frame graph computed: the prior (ny, nx) on the host and its covered pixels."""
-        self._host, self._n = host_m, n_covered
+    @property
+    def takes_roi(self) -> bool:
+        """The frame graph restricts the correlated pixels to a region of interest itself."""
+        return self.pending
+
+    def resolve(self, host_m: np.ndarray, n_covered: int, n_used: int) -> None:
+        """Record what the frame graph computed: the prior (ny, nx) on the host, its covered pixels and those
+        correlated (inside the region of interest)."""
+        self._host, self._n, self.n_used = host_m, n_covered, n_used
 
     def materialise(self) -> DevicePrior:
         """The prior built on the device step by step (`realsense_prior`, fill 'scanline')."""
