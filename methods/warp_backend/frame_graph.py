@@ -278,7 +278,7 @@ class FskGraph:
 
     def run(self, signal: np.ndarray) -> tuple[np.ndarray, tuple[float, int]]:
         """Maps (rows, ny, nx) (depth, magnitude[, coarse depth]) and (z1_m, reference pixel) of a frame."""
-        self.pair_correlator.load(signal[:, :, self.pair])
+        self.pair_correlator.load(signal if self.pair == list(range(signal.shape[2])) else signal[:, :, self.pair])
         if self.three:
             self.all_correlator.load(signal)
         if self.graph is not None:
