@@ -41,6 +41,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from submitit.core.utils import UncompletedJobError
 
 from bench import cli
+from bench.slurm_resources import job_mem_gb
 
 LOCAL_PREFIXES = ("/tmp", "/var/tmp", "/dev/shm", "/run")
 LOCAL_FS_TYPES = {"tmpfs", "ramfs", "devtmpfs"}
@@ -244,7 +245,7 @@ class CheckedSlurmLauncher(SlurmLauncher):
         generic = set(OmegaConf.structured(BaseQueueConf).keys())       # the rest are slurm_<name> (as submitit's)
         fixed = {k if k in generic else f"slurm_{k}": v for k, v in self.params.items()
                  if k not in {"submitit_folder", "max_num_timeout", "timeout_min", "gpus_per_node", "name",
-                              "array_parallelism", "cpus_per_task"} and v not in (None, {}, [])}
+                              "array_parallelism", "cpus_per_task", "mem_gb"} and v not in (None, {}, [])}
         cpus = int(self.params.get("cpus_per_task") or 1)
         available = node_cpus(self.params.get("partition"))
         if available is not None and cpus > available:
@@ -255,7 +256,7 @@ class CheckedSlurmLauncher(SlurmLauncher):
         if "store.dir" in paths:
             absolute.append(f"store.dir={paths['store.dir']}")
         paths["hydra.sweep.dir"].mkdir(parents=True, exist_ok=True)
-        jobs = []
+        jobs, self._mem_gb = [], {}
         for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
             overrides = [*overrides, *absolute]
             cfg = self.hydra_context.config_loader.load_sweep_config(self.config, overrides)
@@ -265,12 +266,16 @@ class CheckedSlurmLauncher(SlurmLauncher):
             captures = len(cfg.dataset.captures) if cfg.dataset.captures is not None else _count(paths)
             timeout = int(self.params.get("timeout_min") or 0) or time_limit_min(cfg, captures)
             gpus = 1 if str(cfg.device) == "cuda" else None
+            mem_gb = job_mem_gb(cfg, captures, self.params.get("mem_gb"))       # 0: from the cell, null: not asked
             executor.update_parameters(**fixed, name=f"bench-{cell}", timeout_min=timeout, cpus_per_task=cpus,
-                                       gpus_per_node=gpus)
+                                       gpus_per_node=gpus, **({} if mem_gb is None else {"mem_gb": mem_gb}))
             job = executor.submit(self, overrides, "hydra.sweep.dir", idx, f"job_id_for_{idx}", Singleton.get_state())
+            memory = "" if mem_gb is None else f", {mem_gb} GB"
             print(f"[submitted {idx + 1}/{len(job_overrides)}] {cell}: job {job.job_id}, {timeout} min, "
-                  f"{cpus} CPUs{', 1 GPU' if gpus else ''} ({' '.join(filter_overrides(overrides))})", flush=True)
+                  f"{cpus} CPUs{memory}{', 1 GPU' if gpus else ''} ({' '.join(filter_overrides(overrides))})",
+                  flush=True)
             jobs.append((idx, cell, timeout, job, cfg))
+            self._mem_gb[job.job_id] = mem_gb
         returns, missing = self._wait(jobs)
         if missing:
             self._report_missing(missing)
@@ -300,7 +305,7 @@ class CheckedSlurmLauncher(SlurmLauncher):
                     first = gone_since.setdefault(job.job_id, time.monotonic())
                     if time.monotonic() - first > GONE_GRACE_S:
                         pending.remove(entry)
-                        cause = death_cause(job, timeout, self.params.get("mem_gb"))
+                        cause = death_cause(job, timeout, self._mem_gb.get(job.job_id))
                         missing.append((cell, f"job {job.job_id} {cause}; log: {job.paths.stderr}"))
             if pending:
                 time.sleep(POLL_S)

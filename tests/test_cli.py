@@ -139,6 +139,9 @@ README_RUNS: dict[str, list[str]] = {
     ".venv/bin/python -m bench.perf_sweep --root data/synthetic [--device cpu|cuda] [--bp-grid capture|small]":
         ["{py} -m bench.perf_sweep --help"],
     ".venv/bin/python -m bench.perf --device cuda --out results": ["{py} -m bench.perf --help"],
+    # minutes (BP on the paper grid); tests/test_slurm_resources.py measures a small cell through it
+    ".venv/bin/python -m bench.perf_memory --root data/synthetic --cells mm2fsk_d10 bp_d05 bp_full --grids cell bp_cpu":
+        ["{py} -m bench.perf_memory --help"],
     # new frames of every capture, minutes on the CPU; test_perf_skips_gpu runs its parts
     ".venv/bin/python -m bench.perf_skips_gpu --root data/synthetic --device cuda":
         ["{py} -m bench.perf_skips_gpu --help"],
