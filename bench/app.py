@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import functools
 import hashlib
 import inspect
 import logging
@@ -269,6 +270,13 @@ def _compute(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, device:
     return row, arrays
 
 
+@functools.lru_cache(maxsize=4)
+def _store(root: str) -> Store:
+    """One Store per root and process: the basic launcher's later cells find the capture files' digests in its
+    memory (bench.store.Store.file_digest) instead of reading them from the store's disk cache again."""
+    return Store(root)
+
+
 def _grid_attrs(grid: RadarGrid) -> dict:
     return {"bb_min_m": list(grid.bb_min_m), "bb_max_m": list(grid.bb_max_m), "grid_size": list(grid.size)}
 
@@ -288,7 +296,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
         ensure_synthetic(cfg.dataset, root, cfg.synth)
     if not root.exists():
         raise DatasetError(root, "dataset root does not exist")
-    store = None if cfg.store.dir is None else Store(to_absolute_path(str(cfg.store.dir)))
+    store = None if cfg.store.dir is None else _store(to_absolute_path(str(cfg.store.dir)))
     device = resolve_device(cfg.device)
     method = _method(cfg)
     cell = _cell(cfg, device, method)

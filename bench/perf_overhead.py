@@ -11,7 +11,8 @@ own warm `total`), resampling and metrics, the store's reads and writes of finis
 files (depth PNG + JSON + preview, arrays.h5, results.csv).
 `other` is the cell's wall time minus all of these. Without --store the result store is off (every cell
 computes). One row per cell and a `total` row: OUT/perf_overhead_<device>.csv (OUT = `--out`, default
-outputs/perf/).
+outputs/perf/). `--results-frames N [N ...]` times instead what results.csv costs over a sequence of N frames,
+appended per frame (what the app does) beside rewritten per frame (what it did): OUT/perf_results_csv.csv.
 """
 from __future__ import annotations
 
@@ -101,19 +102,66 @@ def measure(root: Path, cells: list[str], captures: list[str] | None, device: st
     return rows + [total]
 
 
+def results_csv_cost(frame_counts: list[int], work: Path, columns: int = 45) -> list[dict]:
+    """results.csv over a sequence of N frames, the way the app writes it (one row appended per finished frame,
+    `bench.results.ResultsCsv`) beside the old way (the whole table rewritten after every frame,
+    `bench.results.write_results`), interleaved N by N: total seconds and the last frame's milliseconds."""
+    import numpy as np
+
+    from bench.results import ResultsCsv, write_results
+
+    rng = np.random.default_rng(0)
+    names = ["object", "distance", "frame", "method", "failure"] + [f"value_{i}_cm" for i in range(columns - 5)]
+    rows = []
+    for n in frame_counts:
+        frames = [dict(zip(names, ["04_bottle", 30, i, "mm2fsk", ""] + list(rng.random(columns - 5))))
+                  for i in range(n)]
+        timings = {}
+        for scheme in ("append", "rewrite"):
+            path, spent, last_s = work / f"{scheme}_{n}.csv", 0.0, 0.0
+            writer = ResultsCsv(path)
+            for i in range(n):
+                start = time.perf_counter()
+                if scheme == "append":
+                    writer.add(frames[i])
+                else:
+                    write_results(path, frames[:i + 1])
+                last_s = time.perf_counter() - start
+                spent += last_s
+            timings[scheme] = (spent, last_s)
+        rows.append({"frames": n, "append_s": timings["append"][0], "rewrite_s": timings["rewrite"][0],
+                     "append_last_ms": timings["append"][1] * 1e3, "rewrite_last_ms": timings["rewrite"][1] * 1e3,
+                     "load_1min": os.getloadavg()[0]})
+        print(f"results.csv over {n:5d} frames: appended {timings['append'][0]:6.2f} s (last frame "
+              f"{timings['append'][1] * 1e3:5.2f} ms), rewritten {timings['rewrite'][0]:6.2f} s (last frame "
+              f"{timings['rewrite'][1] * 1e3:6.2f} ms)  load {rows[-1]['load_1min']:.1f}", flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     parser = cli.ArgumentParser(prog="python -m bench.perf_overhead", description=__doc__.splitlines()[0])
-    parser.add_argument("--root", type=Path, required=True, help="dataset root (e.g. data/synthetic)")
+    parser.add_argument("--root", type=Path, default=None, help="dataset root (e.g. data/synthetic)")
     parser.add_argument("--cells", nargs="+", default=None, help="default: the table3 cells")
     parser.add_argument("--captures", nargs="+", default=None, help="OBJECT/DISTANCE (default: all)")
     parser.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto", "warp-cpu"])
     parser.add_argument("--grid", default=None, help="grid config for every cell (e.g. paper, bp_cpu)")
     parser.add_argument("--store", action="store_true", help="use a fresh result store (default: none)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--results-frames", type=int, nargs="+", default=None, metavar="N",
+                        help="instead: results.csv written over N frames, appended beside rewritten "
+                             "(OUT/perf_results_csv.csv)")
     args = parser.parse_args(argv)
+    out = cli.output_dir(args.out)
+    if args.results_frames:
+        if min(args.results_frames) < 1:
+            cli.fail(f"--results-frames {min(args.results_frames)}: give frame counts >= 1")
+        with tempfile.TemporaryDirectory(prefix="perf_results_csv-") as work:
+            write_rows(results_csv_cost(args.results_frames, Path(work)), out / "perf_results_csv.csv")
+        return 0
+    if args.root is None:
+        cli.fail("--root: give the dataset root (e.g. data/synthetic)")
     device = cli.resolve_device(args.device)
     root = cli.existing_path(args.root, "dir", "--root").resolve()
-    out = cli.output_dir(args.out)
     cells = args.cells or [cell["cell"] for cell in table3_cells()]
     with tempfile.TemporaryDirectory(prefix="perf_overhead-") as work:
         rows = measure(root, cells, args.captures, device, args.grid, args.store, Path(work))

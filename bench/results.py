@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from methods.domain.capture import RadarGrid
-from bench.images import write_uint16_png
+from bench.images import PNG_COMPRESS_LEVEL, write_uint16_png
 
 RESULT_COLUMNS = ["object", "distance", "frame", "method", "freq", "prior", "f_GHz", "C_g_cm", "C_s_cm", "P_cm",
                   "P_e_cm", "valid_px", "runtime_ms", "device", "timing"]
@@ -44,7 +44,7 @@ def preview_rgb(scaled: np.ndarray) -> np.ndarray:
     bad = np.isnan(index)
     index[bad] = 0
     index[index == len(table)] = len(table) - 1
-    rgb = table[index.astype(np.intp)]
+    rgb = np.take(table, index.astype(np.intp), axis=0)
     rgb[bad] = grey
     return rgb
 
@@ -59,7 +59,7 @@ def write_depth_preview(path: Path, depth_m: np.ndarray) -> tuple[float, float]:
     low_m, high_m = (float(np.percentile(valid, 1)), float(np.percentile(valid, 99))) if valid.size else (0.0, 1.0)
     scaled = np.clip((depth_m - low_m) / max(high_m - low_m, 1e-6), 0.0, 1.0)
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(preview_rgb(scaled)).save(path)
+    Image.fromarray(preview_rgb(scaled)).save(path, compress_level=PNG_COMPRESS_LEVEL)
     return low_m, high_m
 
 

@@ -101,6 +101,7 @@ class Store:
         self.root = Path(root)
         self.cells = self.root / "cells"
         self.verify = verify
+        self._digests: dict[bytes, str] = {}     # stamp -> digest found or cached by this Store: no file read
 
     def file_digest(self, path: Path) -> str:
         """sha256 of a file's bytes, cached by its stamp (path, device, inode, size, mtime_ns, ctime_ns; module
@@ -112,9 +113,13 @@ class Store:
             before = os.stat(path)
         except OSError:
             return _sha256_file(path, roots=())[0]           # raises the DatasetError naming the file
-        cached = self.root / "digests" / hashlib.sha256(_stamp(path, before)).hexdigest()[:32]
+        stamp = _stamp(path, before)
+        if stamp in self._digests:
+            return self._digests[stamp]
+        cached = self.root / "digests" / hashlib.sha256(stamp).hexdigest()[:32]
         if cached.is_file():
-            return cached.read_text()
+            self._digests[stamp] = cached.read_text()
+            return self._digests[stamp]
         digest, hashed = _sha256_file(path, roots=())
         after = os.stat(path)
         unchanged = _stamp(path, before) == _stamp(path, hashed) == _stamp(path, after)
@@ -122,6 +127,7 @@ class Store:
         if unchanged and settled:
             cached.parent.mkdir(parents=True, exist_ok=True)
             _atomic_write_bytes(cached, digest.encode())
+            self._digests[stamp] = digest
         return digest
 
     def capture_digest(self, files: list[Path]) -> str:

@@ -130,6 +130,8 @@ README_RUNS: dict[str, list[str]] = {
         ["{py} -m bench.perf_stream --help"],          # generates a 10-frame sequence; runs in test_perf_stream
     ".venv/bin/python -m bench.perf_overhead --root data/synthetic [--device cpu|cuda] [--grid paper]":
         ["{py} -m bench.perf_overhead --help"],        # a whole table3; runs in test_perf_overhead
+    ".venv/bin/python -m bench.perf_overhead --results-frames 100 1000":
+        ["{py} -m bench.perf_overhead --results-frames 3 20 --out {tmp}"],
     # frame sequences: generating 10 frames takes minutes; test_frames runs a 3-frame sequence for real
     ".venv/bin/python -m bench.synth --out data/sequence --objects 04_bottle --distances 30 --frames 10 "
     "--motion lateral": ["{py} -m bench.synth --help"],
