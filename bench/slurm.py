@@ -11,8 +11,9 @@ submitting process and before anything is submitted:
 * points every job at one Warp kernel cache beside the store (`WARP_CACHE_PATH`; Warp >= 1.2 builds into a temp
   folder and renames it, so concurrent jobs may share it), instead of one /tmp folder per job;
 * sizes each cell's job: its name (`bench-<cell>`), GPUs (1 for device=cuda, none otherwise), CPUs per task
-  (at most what a node of the partition has: more would leave the job pending forever), and, with
-  `timeout_min: 0`, a time limit from the cell (`time_limit_min`).
+  (at most what a node of the partition has: more would leave the job pending forever), with `mem_gb: 0` its
+  memory from the cell (bench.slurm_resources), and, with `timeout_min: 0`, a time limit from the cell
+  (`time_limit_min`).
 
 Then it waits for every job without relying on accounting: a job is done when submitit's result file appears and
 holds a finished cell, and dead when SLURM no longer lists it (squeue) and no result came; its cause comes from
