@@ -1,6 +1,11 @@
-"""Memory per SLURM job from its cell (bench.slurm_resources): the model against a real job's measured peak, and
-how the launcher's `mem_gb` setting is read."""
+"""Memory per SLURM job from its cell (bench.slurm_resources): the model against a real job's measured peak, how
+the launcher's `mem_gb` setting is read, and what the SLURM preset hands to sbatch."""
 from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
 
 import pytest
 from hydra import compose, initialize_config_dir
@@ -46,3 +51,32 @@ def test_mem_gb_setting():
     assert job_mem_gb(cfg, 8, None) is None                     # null: none asked (mem_per_cpu, cluster default)
     assert job_mem_gb(cfg, 8, 0) == job_mem_gb(cfg, 8) >= slurm_resources.MIN_GB
     assert job_mem_gb(_cfg("cell=mm2fsk_d10", "device=cuda"), 8) == job_mem_gb(cfg, 8) + slurm_resources.CUDA_HOST_GB
+
+
+def test_launcher_asks_sbatch_for_the_cells_memory(synth_root, tmp_path):
+    """The SLURM preset end to end up to sbatch (a stand-in that only answers with a job id): each job's submission
+    script asks for its cell's memory, 2 GB more with a GPU."""
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "sbatch").write_text('#!/bin/sh\necho "Submitted batch job $$"\n')
+    (fake / "squeue").write_text("#!/bin/sh\necho 1\n")          # jobs stay listed: the launcher waits for them
+    for tool in fake.iterdir():
+        tool.chmod(0o755)
+    env = {**os.environ, "PATH": f"{fake}:{os.environ['PATH']}", "BENCH_SLURM_LOCAL_PATHS": "1"}
+    sweep = tmp_path / "sweep"
+    proc = subprocess.Popen([sys.executable, "-m", "bench", "-m", "cell=mm2fsk_d10", "device=cpu,cuda", "dataset=maroon",
+                             f"dataset.root={synth_root}", "hydra/launcher=slurm_cpu", f"store.dir={tmp_path / 'store'}",
+                             f"hydra.sweep.dir={sweep}"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 180
+        while len(scripts := sorted(sweep.glob(".submitit/*/*_submission.sh"))) < 2 and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.stderr.read().decode()
+            time.sleep(0.5)
+        time.sleep(0.5)                                            # the second script fully written
+        asked = sorted(next(line for line in s.read_text().splitlines() if line.startswith("#SBATCH --mem="))
+                       for s in scripts)
+    finally:
+        proc.kill()
+        proc.wait()
+    cpu = job_mem_gb(_cfg("cell=mm2fsk_d10"), 2)
+    assert asked == sorted([f"#SBATCH --mem={cpu}GB", f"#SBATCH --mem={cpu + slurm_resources.CUDA_HOST_GB}GB"])
