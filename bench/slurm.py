@@ -21,7 +21,9 @@ holds a finished cell, and dead when SLURM no longer lists it (squeue) and no re
 and from its log (time limit, cancellation, out of memory, the job's own `error:` line), or from its result (a job
 stopped at SLURM's time-limit warning); the message says which it read. When any job did not finish, the rows of
 the jobs that did are merged (bench.sweep), each missing cell is named with its cause on stderr, and the sweep
-exits 1. A re-run of the same command recomputes only the missing cells (the store).
+exits 1. A re-run of the same command recomputes only the missing cells (the store). A job sbatch refuses (a
+partition, account or GPU the cluster does not have) ends the sweep in one error line, exit 2, the jobs submitted
+before it cancelled; squeue failing for CONTROLLER_LOST_S names the pending jobs instead of waiting forever.
 """
 from __future__ import annotations
 
@@ -39,7 +41,7 @@ from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
 from omegaconf import DictConfig, OmegaConf, open_dict
-from submitit.core.utils import UncompletedJobError
+from submitit.core.utils import FailedJobError, UncompletedJobError
 
 from bench import cli
 from bench.slurm_resources import job_mem_gb
@@ -47,6 +49,7 @@ from bench.slurm_resources import job_mem_gb
 LOCAL_PREFIXES = ("/tmp", "/var/tmp", "/dev/shm", "/run")
 LOCAL_FS_TYPES = {"tmpfs", "ramfs", "devtmpfs"}
 POLL_S = 2.0
+CONTROLLER_LOST_S = 900.0   # squeue failing this long: report the pending jobs instead of waiting forever
 GONE_GRACE_S = 15.0         # a finished job's result file may show on a shared file system a little later
 # Minutes per capture frame on one node, generous (README "The main job" and notes/gpu.md measured ~20 min for
 # BP_max on the paper grid on 2 CPU cores, ~1 s for the FSK methods): (method, many frequencies?, grid, device).
@@ -192,6 +195,17 @@ def death_cause(job, timeout_min: int, mem_gb: int | None) -> str:
     return f"{cause} [{f'{record.source}: {state}' if record.source else 'job log; no accounting'}]"
 
 
+def refused(cell: str, err: Exception, submitted: list) -> None:
+    """One error line (exit 2) for a job sbatch refused (a partition, account, GPU or memory request the cluster
+    does not have, or no controller to ask); the jobs this sweep submitted before it are cancelled, so that none
+    runs unseen."""
+    for job in submitted:
+        job.cancel(check=False)
+    reason = " ".join((str(err).strip().splitlines() or ["sbatch failed"])[-1].split())
+    cancelled = f" (the {len(submitted)} job(s) submitted before it were cancelled)" if submitted else ""
+    cli.fail(f"hydra.launcher: sbatch refused the job of {cell}: {reason}{cancelled}")
+
+
 def result_cause(result: JobReturn, timeout_min: int, signal_delay_s: int) -> str | None:
     """Why a job that returned a result did not finish its cell, or None when it did. A job still running when
     SLURM's time-limit warning comes (submitit's --signal, `signal_delay_s` before the limit) raises submitit's
@@ -270,7 +284,11 @@ class CheckedSlurmLauncher(SlurmLauncher):
             mem_gb = job_mem_gb(cfg, captures, self.params.get("mem_gb"))       # 0: from the cell, null: not asked
             executor.update_parameters(**fixed, name=f"bench-{cell}", timeout_min=timeout, cpus_per_task=cpus,
                                        gpus_per_node=gpus, **({} if mem_gb is None else {"mem_gb": mem_gb}))
-            job = executor.submit(self, overrides, "hydra.sweep.dir", idx, f"job_id_for_{idx}", Singleton.get_state())
+            try:
+                job = executor.submit(self, overrides, "hydra.sweep.dir", idx, f"job_id_for_{idx}",
+                                      Singleton.get_state())
+            except FailedJobError as err:   # sbatch refused it: a setting the user can fix
+                refused(cell, err, [entry[3] for entry in jobs])
             memory = "" if mem_gb is None else f", {mem_gb} GB"
             print(f"[submitted {idx + 1}/{len(job_overrides)}] {cell}: job {job.job_id}, {timeout} min, "
                   f"{cpus} CPUs{memory}{', 1 GPU' if gpus else ''} ({' '.join(filter_overrides(overrides))})",
@@ -285,8 +303,11 @@ class CheckedSlurmLauncher(SlurmLauncher):
     def _wait(self, jobs) -> tuple[list[JobReturn], list[tuple[str, str]]]:
         """Results of the jobs that finished, and (cell, cause) of those that did not."""
         pending, returns, missing, gone_since = list(jobs), [], [], {}
+        answered = time.monotonic()
         while pending:
             listed = listed_jobs()
+            if listed is not None:
+                answered = time.monotonic()
             for entry in list(pending):
                 idx, cell, timeout, job, cfg = entry
                 if Path(job.paths.result_pickle).exists():
@@ -308,6 +329,11 @@ class CheckedSlurmLauncher(SlurmLauncher):
                         pending.remove(entry)
                         cause = death_cause(job, timeout, self._mem_gb.get(job.job_id))
                         missing.append((cell, f"job {job.job_id} {cause}; log: {job.paths.stderr}"))
+            if pending and time.monotonic() - answered > CONTROLLER_LOST_S:   # waiting on would wait forever
+                missing += [(cell, f"job {job.job_id}: no answer from squeue for {CONTROLLER_LOST_S / 60:.0f} min "
+                                   "(SLURM's controller down?); the job may still run: see squeue, or run the same "
+                                   "command again later") for _, cell, _, job, _ in pending]
+                break
             if pending:
                 time.sleep(POLL_S)
         for _, cell, _, _, cfg in jobs:

@@ -123,6 +123,31 @@ def test_a_job_stopped_at_the_time_limit_warning_is_timed_out_not_done():
     assert slurm.result_cause(result(JobStatus.FAILED, KeyError("x")), 2, 60) == "failed: KeyError: 'x' [job result]"
 
 
+def test_a_job_sbatch_refuses_is_one_error_line_and_the_sweeps_jobs_are_cancelled(capsys):
+    from submitit.core.utils import FailedJobError
+
+    cancelled = []
+    submitted = [SimpleNamespace(cancel=lambda check: cancelled.append("41"))]
+    with pytest.raises(SystemExit) as exit_info:
+        slurm.refused("bp_full", FailedJobError("sbatch: error: Batch job submission failed: Invalid partition name "
+                                                "specified"), submitted)
+    assert exit_info.value.code == 2 and cancelled == ["41"]
+    assert capsys.readouterr().err == ("error: hydra.launcher: sbatch refused the job of bp_full: sbatch: error: "
+                                       "Batch job submission failed: Invalid partition name specified (the 1 job(s) "
+                                       "submitted before it were cancelled)\n")
+
+
+def test_jobs_are_reported_not_awaited_forever_when_squeue_stops_answering(monkeypatch, tmp_path):
+    monkeypatch.setattr(slurm, "listed_jobs", lambda: None)             # the controller is down
+    monkeypatch.setattr(slurm, "CONTROLLER_LOST_S", 0.0)
+    launcher = object.__new__(slurm.CheckedSlurmLauncher)
+    job = SimpleNamespace(job_id="7", paths=SimpleNamespace(result_pickle=tmp_path / "7_0_result.pkl"))
+    cfg = OmegaConf.create({"hydra": {"sweep": {"dir": str(tmp_path), "subdir": "0_cell"}}})
+    returns, missing = launcher._wait([(0, "mm2fsk_d8", 15, job, cfg)])
+    assert returns == [] and [cell for cell, _ in missing] == ["mm2fsk_d8"]
+    assert "job 7: no answer from squeue for 0 min" in missing[0][1]
+
+
 def test_a_temp_folder_of_a_live_process_on_another_host_is_a_leftover(tmp_path):
     """The lock decides, not the process id: a temp folder named with a pid alive here (this test's own, as a
     writer on another node could have) is removed by the next writer holding the root's lock."""
