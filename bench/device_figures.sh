@@ -76,8 +76,8 @@ case "${1:-}" in
     log="$out/measure.log"                         # one log: at most 8 files come back from the device
     nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee "$log"
     python3 -m pytest -q -p no:cacheprovider -m cuda tests/test_gpu_frame_graph.py tests/test_gpu_fsk.py \
-      tests/test_gpu_tables.py tests/test_gpu_hull_fill.py tests/test_gpu_prior_depth.py tests/test_gpu_range_points.py \
-      tests/test_correlate.py tests/test_methods_api.py tests/test_methods_conformance.py tests/test_methods_skips.py \
+      tests/test_gpu_tables.py tests/test_gpu_hull_fill.py tests/test_gpu_prior_depth.py \
+      tests/test_correlate.py tests/test_methods_api.py tests/test_methods_conformance.py \
       2>&1 | tail -5 | tee -a "$log" || true                 # a failing test is reported; the figures still run
     python3 -m bench.perf_frames --device cuda --repeat "${REPEAT:-24}" --fill scanline delaunay --out "$out" 2>&1 \
       | grep -Ev "$noise" | tee -a "$log"
