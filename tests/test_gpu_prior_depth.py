@@ -141,7 +141,8 @@ def test_mm2fsk_frame_on_the_device_matches_the_cpu_path(device):
     both = rec.valid & ref.valid
     assert (rec.valid ^ ref.valid).sum() <= 0.01 * ref.valid.sum() + 1   # pixels at the -14 dB threshold
     assert np.max(np.abs(rec.depth_m[both] - ref.depth_m[both])) < 5e-5   # fp16 tensor-core phasors: ~1e-5 m
-    assert {"prior", "correlate", "depth", "filter", "total"} <= set(rec.timings_ms) or device != "cuda"
+    # on CUDA the whole frame is one graph (methods.warp_backend.frame_graph): its time is the 'correlate' stage
+    assert {"prior", "correlate", "total"} <= set(rec.timings_ms) or device != "cuda"
 
 
 @pytest.mark.parametrize("device", DEVICES)
