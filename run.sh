@@ -51,7 +51,7 @@ setup() {
     echo "[setup] installing the package and its dependencies into .venv (first run: about a minute)"
     .venv/bin/python -m pip install -q --upgrade pip
     # open3d-cpu declares ipywidgets, nbformat and ConfigArgParse (Jupyter widgets, notebook files, a CLI helper:
-    # with IPython and jedi ~90 MB) that `import open3d` never loads. Install it without its declared
+    # with IPython and jedi ~70 MB) that `import open3d` never loads. Install it without its declared
     # dependencies, then ours plus those of its own that its import does load (dash, plotly, flask: its
     # visualization package imports its plotly viewer), then this package without resolving again. A plain
     # `pip install .` still works and brings them all.
