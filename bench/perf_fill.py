@@ -20,6 +20,7 @@ import numpy as np
 
 from bench import cli
 from bench.perf_frames import DEFAULT_OUT, write_rows
+from bench.progress import each
 from methods import reconstruct
 from methods.api import prior_image_m
 from methods.prior import FILLS
@@ -55,7 +56,7 @@ def compare_fills(captures, freqs: list[str], device: str, repeat: int) -> list[
     depths, rows = {}, []
     for fill in FILLS:
         filled_px = [int(np.isfinite(p).sum()) for _, p in priors[fill]]
-        for freq in freqs:
+        for freq in each(freqs, f"prior fill {fill}", unit="config"):
             scores, runtimes = [], []
             for capture, truth in zip(captures, truths):
                 rec = reconstruct(capture, "mm2fsk", freq, prior="realsense", device=device,
