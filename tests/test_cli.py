@@ -126,6 +126,8 @@ README_RUNS: dict[str, list[str]] = {
     ".venv/bin/python -m bench.perf_fill --root data/synthetic":
         ["{py} -m bench.perf_fill --help"],            # minutes on the CPU; its parts run in test_perf_fill
     "python -m bench.perf_fill --root DIR": ["{py} -m bench.perf_fill --help"],
+    "python -m bench -m experiment=table3 device=cuda hydra/launcher=basic":
+        ["{py} -m bench experiment=table3 device=cuda hydra/launcher=basic --cfg all"],
     ".venv/bin/python -m bench.perf_stream [--device cpu|cuda] [--root DIR --capture OBJECT/DISTANCE]":
         ["{py} -m bench.perf_stream --help"],          # generates a 10-frame sequence; runs in test_perf_stream
     ".venv/bin/python -m bench.perf_overhead --root data/synthetic [--device cpu|cuda] [--grid paper]":
