@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Every GPU figure of notes/gpu.md round 10 on the device machine, in ten calls of the `run` tool, back to back
+# Every GPU figure of notes/gpu.md round 10 on the device machine, in eleven calls of the `run` tool, back to back
 # (a call carries at most 64 MiB: the wheels and the data travel in parts). Here, once:
 #   [SEQ=CAPTURE] bash bench/device_figures.sh pack [ROOT]   # ROOT: the 30 cm catalogue (default data/synthetic);
 #                    # SEQ: a sequence capture (default: bench.perf_stream's bottle sequence, generated if missing)
@@ -7,8 +7,9 @@
 #   [".wp0"]           bash bench/device_figures.sh part .wp0
 #   [".wp1"]           bash bench/device_figures.sh part .wp1
 #   [".wp2", ".whl"]   bash bench/device_figures.sh part .wp2
-#   [".o3d0"]          bash bench/device_figures.sh part .o3d0
-#   [".o3d1", ".gl"]   bash bench/device_figures.sh part .o3d1
+#   [".o3da"]          bash bench/device_figures.sh part .o3da      # Open3D in three parts: .o3d0 (52 MiB) and the
+#   [".o3db"]          bash bench/device_figures.sh part .o3db      # working tree (14 MiB) exceed one call's 64 MiB
+#   [".o3dc", ".gl"]   bash bench/device_figures.sh part .o3dc
 #   [".gpud0"]         bash bench/device_figures.sh part .gpud0
 #   [".gpud1"]         bash bench/device_figures.sh part .gpud1
 #   [".gpus0"]         bash bench/device_figures.sh part .gpus0
@@ -37,6 +38,12 @@ case "${1:-}" in
     data=${2:-data/synthetic}
     exclude="$(git rev-parse --git-dir)/info/exclude"
     [ -d .wp0 ] && [ -d .o3d0 ] || bash ../shared/tools/device-parts.sh
+    if [ ! -d .o3dc ]; then                          # Open3D's wheel in three parts of <= 36 MiB
+      tmp=$(mktemp -d); cat .o3d0/o3d_* .o3d1/o3d_* > "$tmp/whl"; (cd "$tmp" && split -n 3 -d whl o3dp_)
+      for i in 0 1 2; do d=.o3d$(echo abc | cut -c$((i + 1))); mkdir -p "$d"; mv "$tmp/o3dp_0$i" "$d/"
+        grep -qx "/$d/" "$exclude" 2>/dev/null || echo "/$d/" >> "$exclude"; done
+      cp .o3d1/WHEEL_NAME .o3dc/; rm -rf "$tmp"
+    fi
     for d in .gpud0 .gpud1 .gpus0 .gpus1 .gpus2; do
       grep -qx "/$d/" "$exclude" 2>/dev/null || echo "/$d/" >> "$exclude"; rm -rf "$d"; mkdir -p "$d"
     done
@@ -58,16 +65,16 @@ case "${1:-}" in
       .gpud*|.gpus*) cp -r "$2"/* /root/data/ ;;
       *) cp "$2"/*_0* /root/parts/ 2>/dev/null || true; cp "$2"/WHEEL_NAME "/root/parts/$2.name" 2>/dev/null || true
          [ "$2" = .wp2 ] && cp .whl/*.whl /root/parts/
-         [ "$2" = .o3d1 ] && cp -r .gl /root/gl ;;
+         [ "$2" = .o3dc ] && cp -r .gl /root/gl ;;
     esac
     ls /root/parts /root/data ;;
   measure)
     set +e +o pipefail                             # a failing step is logged; the next ones still run
     cp -r .gpus2/* /root/data/
     cat /root/parts/wp_* > "/tmp/$(cat /root/parts/.wp2.name)"
-    cat /root/parts/o3d_* > "/tmp/$(cat /root/parts/.o3d1.name)"
+    cat /root/parts/o3dp_* > "/tmp/$(cat /root/parts/.o3dc.name)"
     python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site "/tmp/$(cat /root/parts/.wp2.name)" \
-      "/tmp/$(cat /root/parts/.o3d1.name)" /root/parts/*.whl
+      "/tmp/$(cat /root/parts/.o3dc.name)" /root/parts/*.whl
     for f in /root/gl/*.deb; do dpkg -x "$f" /; done; ldconfig
     export PYTHONPATH=/tmp/site:/root/gl/stubs:$PWD PYTHONUNBUFFERED=1 WARP_CACHE_PATH=/root/wpcache
     python3 -m pip install -q --no-deps --no-index --no-build-isolation -e . >/dev/null 2>&1 || true
