@@ -4,7 +4,7 @@
 #   sudo bash scripts/slurm_single_node.sh start [--accounting]   # install (apt-get) what is missing, write the
 #                                                                 # configuration, start the daemons
 #   bash scripts/slurm_single_node.sh status
-#   sudo bash scripts/slurm_single_node.sh stop                   # every daemon this script starts, and waits
+#   sudo bash scripts/slurm_single_node.sh stop                   # every daemon this script started, and waits
 # One partition `cpu` (Default) with every CPU and 90 % of the memory of this machine. Without --accounting:
 # slurmctld, slurmd, munged; sacct has nothing (the harness must report a dead job without it). With --accounting:
 # also MariaDB (local socket only, no TCP port) and slurmdbd, AccountingStorageType=accounting_storage/slurmdbd,
@@ -12,7 +12,8 @@
 # an association refused (AccountingStorageEnforce=associations). Either way memory is enforced by polling
 # (jobacct_gather/linux with OverMemoryKill, every 2 s), not by cgroups: in a container the cgroup hierarchy is
 # the host's, and task/cgroup would create cgroups outside the container's own. `start` is idempotent: daemons
-# already running are kept, and restarted only where the configuration changed (switching mode).
+# already running are kept, and restarted only where the configuration changed (switching mode). `stop` stops the
+# SLURM daemons, and munged and MariaDB only where this script started them (/run/slurm_single_node).
 # Not for production clusters (SlurmUser=root, no cgroups).
 set -euo pipefail
 action="${1:-start}"
@@ -22,6 +23,7 @@ state_dir=/var/spool/slurmctld
 node="$(hostname -s)"
 db_sock=/run/mysqld/mysqld.sock
 db_pid=/run/mysqld/mysqld.pid
+ours=/run/slurm_single_node   # a file per shared daemon this script started (munged, MariaDB): only those are stopped
 
 need_root() { [ "$(id -u)" = 0 ] || { echo "error: $0 $action: run as root (sudo)" >&2; exit 2; }; }
 
@@ -113,7 +115,9 @@ start_munge() {
     [ -s /etc/munge/munge.key ] || { mungekey --create 2>/dev/null || create-munge-key -f; }
     chown munge:munge /etc/munge/munge.key && chmod 400 /etc/munge/munge.key
     mkdir -p /run/munge && chown munge:munge /run/munge
-    running /run/munge/munged.pid || runuser -u munge -- /usr/sbin/munged
+    running /run/munge/munged.pid && return
+    runuser -u munge -- /usr/sbin/munged
+    mkdir -p "$ours" && touch "$ours/munged"
 }
 
 start_database() {   # MariaDB on its socket only, the accounting database and its user, then slurmdbd
@@ -124,6 +128,7 @@ start_database() {   # MariaDB on its socket only, the accounting database and i
         # innodb_lock_wait_timeout as slurmdbd's documentation asks; no TCP port (slurmdbd uses the socket)
         setsid /usr/sbin/mariadbd --user=mysql --skip-networking --socket="$db_sock" --pid-file="$db_pid" \
             --innodb-lock-wait-timeout=900 --log-error=/var/log/mysql/error.log </dev/null >/dev/null 2>&1 &
+        mkdir -p "$ours" && touch "$ours/mariadb"
     fi
     wait_for MariaDB 60 mariadb-admin --socket="$db_sock" ping
     # the database password lives in slurmdbd.conf only (mode 600); kept across starts
@@ -201,10 +206,10 @@ start() {
     exit 1
 }
 
-stop_database() {
-    running "$db_pid" || return 0
+stop_database() {   # only a MariaDB this script started (another may serve other users on this machine)
+    [ -e "$ours/mariadb" ] && running "$db_pid" || return 0
     mariadb-admin --socket="$db_sock" shutdown 2>/dev/null || true   # a clean InnoDB shutdown; else SIGTERM
-    stop_daemon MariaDB "$db_pid"
+    stop_daemon MariaDB "$db_pid" && rm -f "$ours/mariadb"
 }
 
 stop() {
@@ -213,7 +218,10 @@ stop() {
     stop_daemon slurmctld /run/slurmctld.pid
     stop_daemon slurmdbd /run/slurmdbd.pid
     stop_database
-    if running /run/munge/munged.pid; then munged --stop >/dev/null 2>&1 || stop_daemon munged /run/munge/munged.pid; fi
+    if [ -e "$ours/munged" ] && running /run/munge/munged.pid; then
+        munged --stop >/dev/null 2>&1 || stop_daemon munged /run/munge/munged.pid
+    fi
+    rm -f "$ours/munged"
 }
 
 status() {
