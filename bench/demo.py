@@ -97,6 +97,7 @@ def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "rea
                "dataset=synthetic", f"dataset.root={root}", f"synth={synth}", f"store.dir={store}",
                f"dataset.captures=[{captures}]", f"dataset.generate.distances=[{','.join(map(str, distances))}]",
                f"hydra.sweep.dir={out / experiment}",
+               "report.depth_errors=true",                 # results/<table>/depth_errors is published
                *QUIET]
     print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
     shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells

@@ -125,7 +125,7 @@ def _sweep(tmp_path, synth_root, launcher: str, freqs: str) -> pd.DataFrame:
     root = tmp_path / "sweep"
     result = _bench("-m", "experiment=table2", f"hydra.sweeper.params.freq='{freqs}'", f"hydra/launcher={launcher}",
                     "dataset=maroon", f"dataset.root={synth_root}", "dataset.captures=[01_plate/30]",
-                    f"store.dir={tmp_path / 'store'}", f"hydra.sweep.dir={root}")
+                    f"store.dir={tmp_path / 'store'}", f"hydra.sweep.dir={root}", "report.depth_errors=true")
     assert result.returncode == 0, result.stderr
     if launcher != "submitit_local":                                    # submitit keeps job output in its logs
         jobs = len(freqs.split(","))
