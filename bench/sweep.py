@@ -14,7 +14,7 @@ import pandas as pd
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-from bench import cli, plots, tables
+from bench import cli, tables
 from bench.results import write_results
 
 
@@ -35,6 +35,8 @@ def merge(root: Path) -> pd.DataFrame:
 def report(root: Path, table: str | None, depth_errors: bool = False) -> pd.DataFrame:
     """Merge the rows; with a table name also write the table (md, csv, tex) and the runtime plot, and with
     depth_errors the per-capture depth-error figures; returns the summary."""
+    from bench import plots     # matplotlib (~1 s): only at the end of a sweep, not in every run that loads the callback
+
     rows = merge(root)
     summary = tables.summarise(rows)
     if table is not None:
