@@ -90,7 +90,8 @@ def succeeded(rows: pd.DataFrame) -> pd.Series:
     """Per result row: every metric defined and no `failure` recorded (older files have no failure column)."""
     ok = rows[METRICS_CM].notna().all(axis=1)
     if "failure" in rows:
-        ok &= rows["failure"].fillna("").astype(str).str.len() == 0
+        failure = rows["failure"]
+        ok &= failure.isna() | (failure.astype(str) == "")     # all-NaN columns read back as float64
     return ok
 
 
