@@ -179,7 +179,7 @@ def main() -> int:
             publish(out / experiment, pd.read_csv(out / experiment / "results.csv"), experiment, args.results)
         # the paper-agreement report from these very rows (no second sweep; bench.agreement)
         agreement.write_from_sweeps(*(pd.read_csv(out / e / "results.csv") for e in EXPERIMENTS),
-                                    args.results / "agreement.md", args.synth)
+                                    args.results / "agreement.md", args.synth, root)
     print(f"\nreport (tables, spread, per object, pictures; open in a browser): {page}")
     copied = f"; tables, plots and baselines copied to {args.results}" if args.update_results else ""
     print(f"outputs under {out}{copied}; {time.perf_counter() - started:.0f} s in all")

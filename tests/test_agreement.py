@@ -58,3 +58,19 @@ def test_prior_errors_measure_the_realsense_prior_against_the_ground_truth(synth
         column = next(c for c in line.index if c.startswith("share beyond"))
         assert line["pixels"] > 1000 and line[column] == pytest.approx(share, abs=0.02)
     assert 10.0 < line["median error mm"] < 13.0
+
+
+def test_variants_table_shows_what_a_camera_error_costs_mm2fsk(tmp_path):
+    """The ablation's machinery on one capture: a camera reading 4 % far (12 mm at 30 cm, beyond Δ10's 7.5 mm)
+    raises MM-2FSK Δ10's P with the RealSense prior and leaves the photogrammetry prior's alone."""
+    from bench.synth.config import preset
+
+    variants = {"all effects on": {}, "far camera": {"depth_scale_error": 0.04}}
+    table = agreement.variants_table(preset("realistic"), variants, "camera", ["01_plate"],
+                                     list(agreement.CAMERA_BOUNDS_CELLS), None, tmp_path).set_index("camera")
+    assert list(table.index) == list(variants)
+    assert table.loc["far camera", "mm2fsk_d10@photogrammetry"] == table.loc["all effects on",
+                                                                            "mm2fsk_d10@photogrammetry"]
+    assert table.loc["far camera", "mm2fsk_d10"] > table.loc["all effects on", "mm2fsk_d10"] + 0.3
+    assert table.loc["far camera", "prior cost d10"] > 2.0
+    assert (tmp_path / "ablation" / "far_camera" / "01_plate" / "30").is_dir()

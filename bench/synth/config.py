@@ -158,6 +158,8 @@ EFFECTS: dict[str, dict] = {
     "ground-truth registration": {"gt_registration_mm": 0.0, "gt_registration_deg": 0.0},
     "ground-truth smoothing": {"gt_smoothing_steps": 0, "gt_mesh_subdivisions": 0},
 }
+# Effects modelled but off in the realistic preset (cost), with the settings that switch them on.
+OPT_IN_EFFECTS: dict[str, dict] = {"second-order multipath": {"multipath": True}}
 
 PRESETS: dict[str, SynthConfig] = {
     "ideal": SynthConfig(),
