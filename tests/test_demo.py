@@ -24,8 +24,15 @@ def _fake_sweep(experiment, root, out, store, synth="realistic", distances_cm=No
     return rows
 
 
+def _small_capture(root, synth, distances_cm=None):
+    """The one capture the fake sweeps' rows name, small (16 frequencies): the agreement report measures it."""
+    from bench.synth import SynthConfig, generate_capture
+
+    generate_capture(root, "01_plate", 30, SynthConfig(frequency_points=16))
+
+
 def _main(monkeypatch, tmp_path, *args):
-    monkeypatch.setattr(demo, "generate_dataset", lambda root, synth, distances_cm=None: None)
+    monkeypatch.setattr(demo, "generate_dataset", _small_capture)
     monkeypatch.setattr(demo, "sweep", _fake_sweep)
     monkeypatch.setattr(demo, "report_page", lambda out: out / "report.html")      # tested in test_report.py
     monkeypatch.setattr(sys, "argv", ["bench.demo", "--root", str(tmp_path / "data"), "--out", str(tmp_path / "out"),
@@ -62,7 +69,9 @@ def test_update_results_copies_tables_plots_and_baselines(monkeypatch, tmp_path)
     results = tmp_path / "results"
     assert {p.name for p in results.iterdir()} == {"table1.csv", "table1.md", "table2", "table3", "agreement.md"}
     assert (results / "table3" / "runtime_vs_error.png").is_file()
-    assert "| MM-2FSK Δ10.0 | 1/1 | 0.10 | 0.82 |" in (results / "agreement.md").read_text()   # from the sweep rows
+    report = (results / "agreement.md").read_text()
+    assert "| MM-2FSK Δ10.0 | 1/1 | 0.10 | 0.82 |" in report                        # from the sweep rows
+    assert "## Placement against" in report and "| 01_plate | 30." in report       # measured on the capture
     assert (results / "table3" / "depth_errors" / "01_plate_30_000000.png").is_file()
     baseline = pd.read_csv(results / "table2" / "results.csv")
     assert "cached" not in baseline and list(baseline.timing) == ["alone"]
