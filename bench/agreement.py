@@ -194,7 +194,9 @@ CAMERA_BOUNDS_CELLS = ("mm2fsk_d10", "mm2fsk_d10@photogrammetry")
 def variants_table(config, variants: dict[str, dict], column: str, objects: list[str], cells: list[str],
                    store: Path | None, out: Path) -> pd.DataFrame:
     """P (cm) per cell for each variant of `config` (name -> settings replaced), on a reduced frequency grid; plus
-    the prior cost at Δ10 where both MM-2FSK Δ10 cells ran. Variants of the same name share their captures."""
+    the prior cost at Δ10 where both MM-2FSK Δ10 cells ran (columns: the cells' labels; MM-2FSK without a prior
+    named runs on the RealSense prior). Variants of the same name share their captures."""
+    labels = labels_of(cells)
     lines = []
     for name, change in variants.items():
         variant = dataclasses.replace(config, frequency_points=ABLATION_FREQUENCY_POINTS, **change)
@@ -203,7 +205,7 @@ def variants_table(config, variants: dict[str, dict], column: str, objects: list
         print(f"ablation '{name}': data {seconds:.0f} s", flush=True)
         summary = means(run_cells(out / "ablation" / slug, cells, objects, store, out / "ablation_runs" / slug))
         line = {column: name}
-        line.update({cell: summary.loc[cell, "P_cm"] for cell in cells if cell in summary.index})
+        line.update({labels[cell]: summary.loc[cell, "P_cm"] for cell in cells if cell in summary.index})
         if {"mm2fsk_d10", "mm2fsk_d10@photogrammetry"} <= set(summary.index):
             line["prior cost d10"] = summary.loc["mm2fsk_d10", "P_cm"] / summary.loc["mm2fsk_d10@photogrammetry",
                                                                                       "P_cm"]
@@ -211,12 +213,24 @@ def variants_table(config, variants: dict[str, dict], column: str, objects: list
     return pd.DataFrame(lines)
 
 
+def paper_row(cells: list[str], column: str) -> dict:
+    """The paper's P (cm) of `cells` and its prior cost at Δ10, as one line of a `variants_table`."""
+    labels, line = labels_of(cells), {column: "paper (45 MAROON objects, 128 frequencies)"}
+    for cell in cells:
+        name, _, prior = cell.partition("@")
+        line[labels[cell]] = (PAPER_TABLE2[name.split("_", 1)[1]] if prior else PAPER_TABLE3[name])[2]
+    if {"mm2fsk_d10", "mm2fsk_d10@photogrammetry"} <= set(cells):
+        line["prior cost d10"] = PAPER_TABLE3["mm2fsk_d10"][2] / PAPER_TABLE2["d10"][2]
+    return line
+
+
 def ablation(config, objects: list[str], cells: list[str], store: Path | None, out: Path) -> pd.DataFrame:
     """`variants_table` with the preset, each effect off (EFFECTS) and each opt-in effect on (OPT_IN_EFFECTS)."""
     from bench.synth.config import EFFECTS, OPT_IN_EFFECTS
 
     variants = {"all effects on": {}, **EFFECTS, **{f"(on) {name}": on for name, on in OPT_IN_EFFECTS.items()}}
-    return variants_table(config, variants, "effect off (or on)", objects, cells, store, out)
+    table = variants_table(config, variants, "effect off (or on)", objects, cells, store, out)
+    return pd.concat([table, pd.DataFrame([paper_row(cells, "effect off (or on)")])], ignore_index=True)
 
 
 def prior_errors(root: Path, objects: list[str]) -> pd.DataFrame:
@@ -377,6 +391,8 @@ def main() -> int:
         table = ablation(config, args.ablation_objects, args.ablation_cells, store, out)
         bounds = variants_table(config, CAMERA_BOUNDS, "camera error", args.ablation_objects,
                                 list(CAMERA_BOUNDS_CELLS), store, out)
+        bounds = pd.concat([bounds, pd.DataFrame([paper_row(list(CAMERA_BOUNDS_CELLS), "camera error")])],
+                           ignore_index=True)
         parts += [f"\n## Ablation: P (cm) with one effect off, opt-in effects on ({', '.join(args.ablation_objects)}; "
                   f"{ABLATION_FREQUENCY_POINTS} frequencies)\n", _markdown(table),
                   "\n## The camera's errors at their sources' bounds: MM-2FSK Δ10's P (cm) and the prior's cost "

@@ -69,8 +69,15 @@ def test_variants_table_shows_what_a_camera_error_costs_mm2fsk(tmp_path):
     table = agreement.variants_table(preset("realistic"), variants, "camera", ["01_plate"],
                                      list(agreement.CAMERA_BOUNDS_CELLS), None, tmp_path).set_index("camera")
     assert list(table.index) == list(variants)
-    assert table.loc["far camera", "mm2fsk_d10@photogrammetry"] == table.loc["all effects on",
-                                                                            "mm2fsk_d10@photogrammetry"]
-    assert table.loc["far camera", "mm2fsk_d10"] > table.loc["all effects on", "mm2fsk_d10"] + 0.3
+    camera, truth = "MM-2FSK Δ10.0", "MM-2FSK Δ10.0 (photogrammetry)"
+    assert table.loc["far camera", truth] == table.loc["all effects on", truth]
+    assert table.loc["far camera", camera] > table.loc["all effects on", camera] + 0.3
     assert table.loc["far camera", "prior cost d10"] > 2.0
     assert (tmp_path / "ablation" / "far_camera" / "01_plate" / "30").is_dir()
+
+
+def test_the_paper_row_of_the_ablation_holds_its_p_and_prior_cost():
+    line = agreement.paper_row(["mm2fsk_d10", "mm2fsk_d10@photogrammetry", "2fsk_d05"], "effect")
+    assert line["MM-2FSK Δ10.0"] == 1.36 and line["MM-2FSK Δ10.0 (photogrammetry)"] == 0.19
+    assert line["2FSK Δ0.5"] == 2.55 and line["prior cost d10"] == pytest.approx(7.16, abs=0.01)
+    assert "prior cost d10" not in agreement.paper_row(["2fsk_d05"], "effect")
