@@ -96,7 +96,32 @@ class GraphCorrelator:
         return self.out
 
 
-class FrameGraph:
+class CapturedLaunches:
+    """A fixed sequence of copies and launches on fixed buffers (`_enqueue`, defined by the subclass), captured once
+    as a CUDA graph and replayed per frame; Warp-CPU has no graphs, so there it is issued anew each time."""
+
+    device: wp.Device
+    graph = None
+
+    def _enqueue(self) -> None:
+        raise NotImplementedError
+
+    def _capture(self) -> None:
+        if not self.device.is_cpu:
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._enqueue()
+            self.graph = capture.graph
+
+    def _replay(self) -> None:
+        """Run the sequence once and wait for the device."""
+        if self.graph is not None:
+            wp.capture_launch(self.graph)
+        else:
+            self._enqueue()
+        wp.synchronize_device(self.device)
+
+
+class FrameGraph(CapturedLaunches):
     """The buffers and launches of one setting (module doc); `run(depth, signal)` computes a frame."""
 
     def __init__(self, buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio):
@@ -134,11 +159,7 @@ class FrameGraph:
         self.x_m, self.y_m = grid_arrays(buffers, grid)
         self.m_per_rad = float(C_M_PER_S / (4.0 * np.pi * (freqs_hz[1] - freqs_hz[0])))
         self.keep_ratio = float(keep_ratio)
-        self.graph = None
-        if not dev.is_cpu:
-            with wp.ScopedCapture(device=dev) as capture:
-                self._enqueue()
-            self.graph = capture.graph
+        self._capture()
 
     def _enqueue(self) -> None:
         """Every copy and launch of a frame, in stream order (captured once on CUDA; issued per frame on Warp-CPU)."""
@@ -182,11 +203,7 @@ class FrameGraph:
         if self.use_mask:
             np.copyto(self.mask_host.numpy(), depth.mask, casting="unsafe")
         self.correlator.load(signal)
-        if self.graph is not None:
-            wp.capture_launch(self.graph)
-        else:
-            self._enqueue()
-        wp.synchronize_device(self.device)
+        self._replay()
         maps = self.maps_host.numpy().reshape(3, *self.shape).copy()
         n_covered, n_filled = (int(v) for v in self.stats_host.numpy())
         return maps[0], maps[1], maps[2], n_covered + n_filled, int(self.slot_host.numpy()[0])
@@ -203,7 +220,7 @@ def frame_graph(buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx
     return _GRAPHS[key]
 
 
-class FskGraph:
+class FskGraph(CapturedLaunches):
     """2FSK or 3FSK over a fixed pixel list as one CUDA graph (`warp_backend.fsk.two_pass` / `three_fsk`'s launches
     on fixed buffers): the pair's (2FSK: both frequencies; 3FSK: the coarse pair) pass 1 at the scalar prior,
     the strongest pixel, the refocused pass 2, then 2FSK's pair depth or 3FSK's coarse step, third correlation and
@@ -236,11 +253,7 @@ class FskGraph:
         centred_hz = offsets_hz - offsets_hz.mean()
         self.centred = wp.vec3d(*(centred_hz / (centred_hz @ centred_hz))) if three else None
         self.prior_m, self.keep_ratio, self.first_only = float(prior_m), float(keep_ratio), int(first_only)
-        self.graph = None
-        if not dev.is_cpu:
-            with wp.ScopedCapture(device=dev) as capture:
-                self._enqueue()
-            self.graph = capture.graph
+        self._capture()
 
     def _enqueue(self) -> None:
         dev, n, nx = self.device, self.points.shape[0], self.shape[1]
@@ -281,11 +294,7 @@ class FskGraph:
         self.pair_correlator.load(signal if self.pair == list(range(signal.shape[2])) else signal[:, :, self.pair])
         if self.three:
             self.all_correlator.load(signal)
-        if self.graph is not None:
-            wp.capture_launch(self.graph)
-        else:
-            self._enqueue()
-        wp.synchronize_device(self.device)
+        self._replay()
         z1_m, ref = self.scalars_host.numpy()
         return self.maps_host.numpy().reshape(-1, *self.shape).copy(), (float(z1_m), int(ref))
 
