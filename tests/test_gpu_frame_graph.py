@@ -12,20 +12,23 @@ from methods.frequencies import config_indices
 from methods_scenes import ANTENNAS, CAMERA, MAROON_FREQS_HZ, plane_depth_frame, realsense2radar, simulate, square_grid
 
 
+def _mm2fsk_setting(device):
+    """The MM-2FSK graph tests' setting: backend, fresh generator, camera transform, 61 x 61 grid, the Δ10 pair and
+    the camera's pixel rows and columns."""
+    from methods.backend import backend_for
+
+    return (backend_for(device), np.random.default_rng(), realsense2radar(), square_grid(0.05, 61),
+            MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, "d10")], np.mgrid[:CAMERA.height, :CAMERA.width])
+
+
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 def test_frame_graph_equals_the_step_by_step_device_path(device):
-    from methods.backend import backend_for
     from methods.timing import StageTimer
     from methods.warp_backend import fsk
     from methods.warp_backend.frame_graph import frame_graph
     from methods.warp_backend.prior import realsense_prior
 
-    backend = backend_for(device)
-    rng = np.random.default_rng()
-    cam2radar = realsense2radar()
-    grid = square_grid(0.05, 61)
-    freqs_hz = MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, "d10")]
-    rows, cols = np.mgrid[:CAMERA.height, :CAMERA.width]
+    backend, rng, cam2radar, grid, freqs_hz, (rows, cols) = _mm2fsk_setting(device)
     for _ in range(2):
         z0 = rng.uniform(0.28, 0.34)
         frame = plane_depth_frame(z0, rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), cam2radar,
@@ -91,18 +94,12 @@ def test_fsk_graph_equals_the_step_by_step_device_path(device, freq):
 def test_frame_graph_restricts_to_the_roi_as_the_host_path_does(device):
     """A mask_bb-like region of interest: the graph correlates only the prior's pixels inside it and filters
     relative to their maximum, as MM-2FSK's host path does with the same prior image and backend."""
-    from methods.backend import backend_for
     from methods.mm2fsk import reconstruct_mm2fsk
     from methods.prior_image import HostPrior
     from methods.roi import Roi
     from methods.warp_backend.prior import DeferredPrior
 
-    backend = backend_for(device)
-    rng = np.random.default_rng()
-    cam2radar = realsense2radar()
-    grid = square_grid(0.05, 61)
-    freqs_hz = MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, "d10")]
-    rows, cols = np.mgrid[:CAMERA.height, :CAMERA.width]
+    backend, rng, cam2radar, grid, freqs_hz, (rows, cols) = _mm2fsk_setting(device)
     z0 = rng.uniform(0.28, 0.34)
     frame = plane_depth_frame(z0, 0.1, -0.1, cam2radar, mask=(cols - 320) ** 2 + (rows - 240) ** 2 < 150 ** 2)
     points = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), np.full(40, z0)])
