@@ -224,13 +224,17 @@ def paper_row(cells: list[str], column: str) -> dict:
     return line
 
 
+def with_paper_row(table: pd.DataFrame, cells: list[str]) -> pd.DataFrame:
+    """A `variants_table` of `cells` with the paper's line appended."""
+    return pd.concat([table, pd.DataFrame([paper_row(cells, table.columns[0])])], ignore_index=True)
+
+
 def ablation(config, objects: list[str], cells: list[str], store: Path | None, out: Path) -> pd.DataFrame:
     """`variants_table` with the preset, each effect off (EFFECTS) and each opt-in effect on (OPT_IN_EFFECTS)."""
     from bench.synth.config import EFFECTS, OPT_IN_EFFECTS
 
     variants = {"all effects on": {}, **EFFECTS, **{f"(on) {name}": on for name, on in OPT_IN_EFFECTS.items()}}
-    table = variants_table(config, variants, "effect off (or on)", objects, cells, store, out)
-    return pd.concat([table, pd.DataFrame([paper_row(cells, "effect off (or on)")])], ignore_index=True)
+    return variants_table(config, variants, "effect off (or on)", objects, cells, store, out)
 
 
 def prior_errors(root: Path, objects: list[str]) -> pd.DataFrame:
@@ -391,11 +395,10 @@ def main() -> int:
         rows.to_csv(out / "rows.csv", index=False)
         parts = report(rows, name, args.objects) + capture_sections(root, args.objects, rows)
     if args.ablation:
-        table = ablation(config, args.ablation_objects, args.ablation_cells, store, out)
-        bounds = variants_table(config, CAMERA_BOUNDS, "camera error", args.ablation_objects,
-                                list(CAMERA_BOUNDS_CELLS), store, out)
-        bounds = pd.concat([bounds, pd.DataFrame([paper_row(list(CAMERA_BOUNDS_CELLS), "camera error")])],
-                           ignore_index=True)
+        table = with_paper_row(ablation(config, args.ablation_objects, args.ablation_cells, store, out),
+                               args.ablation_cells)
+        bounds = with_paper_row(variants_table(config, CAMERA_BOUNDS, "camera error", args.ablation_objects,
+                                               list(CAMERA_BOUNDS_CELLS), store, out), list(CAMERA_BOUNDS_CELLS))
         parts += [f"\n## Ablation: P (cm) with one effect off, opt-in effects on ({', '.join(args.ablation_objects)}; "
                   f"{ABLATION_FREQUENCY_POINTS} frequencies)\n", _markdown(table),
                   "\n## The camera's errors at their sources' bounds: MM-2FSK Δ10's P (cm) and the prior's cost "
