@@ -1,4 +1,4 @@
-"""`python -m bench ...`: the Hydra app (see bench/app.py).
+"""`python -m bench ...`: the Hydra app (see bench/harness/app.py).
 
 Before Hydra starts, its command line is checked with Hydra's own parser made one-line (an unknown flag, or two
 of -m/--cfg/--info/--run/--shell-completion, which Hydra reports with a usage dump or a traceback), and an
@@ -36,7 +36,7 @@ def check_command_line(argv: list[str]) -> None:
 def _main() -> None:
     logging.raiseExceptions = False    # a log line to a closed stdout is dropped, not a '--- Logging error ---' dump
     check_command_line(sys.argv[1:])
-    from bench.app import main
+    from bench.harness.app import main
 
     main()
 

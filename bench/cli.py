@@ -4,7 +4,8 @@ non-zero exit, never a traceback.
 * `run_guarded(main)` runs an entry point: a DatasetError (bad data), a UserError (bad argument or path), a
   UsageError (a request the methods refuse), an
   OSError naming a file (cannot read or write it) or an unusable device -> one line on stderr, exit 2;
-  Ctrl-C -> `interrupted`, exit 130; a closed stdout (`python -m bench.tables table3 | head -1`) -> nothing more is
+  Ctrl-C -> `interrupted`, exit 130; a closed stdout (`python -m bench.report.tables table3 | head -1`) -> nothing
+  more is
   written and the exit code is 141 (128 + SIGPIPE, what the shell reports for a tool killed by a closed pipe, so
   `set -o pipefail` treats us like `cat`). Anything else is a bug and keeps its traceback.
 * `ArgumentParser`: argparse whose errors are one line (`error: <message> (see <prog> --help)`, exit 2).
@@ -38,7 +39,7 @@ class UserError(Exception):
 
 def error_line(err: BaseException) -> str | None:
     """The one-line message (without `error: `) for an error a user can fix, or None for a bug."""
-    from methods.backend import DeviceUnavailableError
+    from methods.backends import DeviceUnavailableError
 
     if isinstance(err, (DatasetError, UserError, UsageError)):
         return str(err)
@@ -156,10 +157,10 @@ def output_file(path: str | Path) -> Path:
 
 
 def resolve_device(device: str, option: str = "--device ") -> str:
-    """methods.backend.resolve_device, with an unusable device as a UserError that spells `option`
+    """methods.backends.resolve_device, with an unusable device as a UserError that spells `option`
     (`"--device "` for argparse, `"device="` for Hydra overrides)."""
-    from methods.backend import DEVICES, DeviceUnavailableError
-    from methods.backend import resolve_device as resolve
+    from methods.backends import DEVICES, DeviceUnavailableError
+    from methods.backends import resolve_device as resolve
 
     if device not in DEVICES:
         raise UserError(f"{option}{device}", f"unknown device (choose from {', '.join(DEVICES)})")

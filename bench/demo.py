@@ -1,4 +1,5 @@
-"""`python -m bench.demo [--root DIR] [--out DIR] [--store DIR] [--synth realistic|ideal] [--update-results [--results DIR]]`:
+"""`python -m bench.demo [--root DIR] [--out DIR] [--store DIR] [--synth realistic|ideal] [--update-results [--results
+DIR]]`:
 
 1. Generates the embedded synthetic dataset (`--root`, default data/synthetic) in this process, one line per
    capture, before any sweep starts (cached: a re-run finds every capture up to date in milliseconds).
@@ -6,12 +7,12 @@
    experiment=NAME hydra/launcher=basic` would: one job at a time, so every runtime in the tables is measured
    alone (rows get `timing=alone`; stored rows timed beside other jobs are re-measured). Finished cells come from
    the result store (`--store`), so a re-run computes only missing cells. Each job prints one progress line.
-3. Prints Tables I-III and writes one HTML page, `<out>/report.html` (bench.report: every table with its spread
+3. Prints Tables I-III and writes one HTML page, `<out>/report.html` (bench.report.html: every table with its spread
    across captures, a per-object view, the runtime plot, paper-style pictures for table3), and prints its path.
    Everything goes under `--out` (default outputs/demo): the sweep roots `<out>/table2|table3/` and Table I
    `<out>/table1.*`. Tracked files are left alone unless `--update-results` is given: then Table I and
    each sweep's tables, plots and per-capture rows (the regression baselines) are copied into `--results`
-   (default results/), with `agreement.md`: the tables beside the paper's (bench.agreement, from the same rows).
+   (default results/), with `agreement.md`: the tables beside the paper's (bench.report.agreement, from the same rows).
 """
 from __future__ import annotations
 
@@ -25,9 +26,10 @@ from pathlib import Path
 import pandas as pd
 from omegaconf import OmegaConf
 
-from bench import agreement, cli, tables
-from bench.app import CONFIG_DIR
+from bench import cli
+from bench.harness.app import CONFIG_DIR
 from bench.progress import run_relayed
+from bench.report import agreement, tables
 
 EXPERIMENTS = ("table2", "table3")
 REPORT_FILES = ("{table}.md", "{table}.csv", "{table}.tex", "runtime_vs_error.png")
@@ -73,7 +75,8 @@ def generate_dataset(root: Path, synth: str = "realistic", distances_cm: list[in
 
 
 def _reason(stderr_tail: list[str]) -> str:
-    """The failing sweep's own explanation: its last `error:` line (bench.app), else the headline of Hydra's last
+    """The failing sweep's own explanation: its last `error:` line (bench.harness.app), else the headline of Hydra's
+    last
     message (the exception line of a traceback), without Hydra's HYDRA_FULL_ERROR hint."""
     errors = [line for line in stderr_tail if line.startswith("error:")]
     if errors:
@@ -116,7 +119,8 @@ def publish(sweep_root: Path, rows: pd.DataFrame, table: str, results: Path) -> 
     for name in REPORT_FILES:
         shutil.copy2(sweep_root / name.format(table=table), target)
     shutil.copytree(sweep_root / "depth_errors", target / "depth_errors")
-    pictures = sweep_root / "pictures" / "point_clouds"        # the paper-style figures (bench.report), not the PLY
+    # the paper-style figures (bench.report.html), not the PLY
+    pictures = sweep_root / "pictures" / "point_clouds"
     for picture in sorted(pictures.glob("*.png")) if pictures.is_dir() else []:
         (target / "point_clouds").mkdir(exist_ok=True)
         shutil.copy2(picture, target / "point_clouds")
@@ -124,11 +128,11 @@ def publish(sweep_root: Path, rows: pd.DataFrame, table: str, results: Path) -> 
 
 
 def report_page(out: Path) -> Path:
-    """`out/report.html` (bench.report) over the demo's sweep roots; pictures for table3, which holds every method
+    """`out/report.html` (bench.report.html) over the demo's sweep roots; pictures for table3, which holds every method
     (they cost several seconds per capture and cell)."""
-    from bench import report
+    from bench.report import html
 
-    return report.write_report([out / name for name in EXPERIMENTS], out / "report.html",
+    return html.write_report([out / name for name in EXPERIMENTS], out / "report.html",
                                pictures=[out / "table3"])
 
 
@@ -177,7 +181,7 @@ def main() -> int:
         write_table1(args.results)
         for experiment in EXPERIMENTS:
             publish(out / experiment, pd.read_csv(out / experiment / "results.csv"), experiment, args.results)
-        # the paper-agreement report from these very rows (no second sweep; bench.agreement)
+        # the paper-agreement report from these very rows (no second sweep; bench.report.agreement)
         agreement.write_from_sweeps(*(pd.read_csv(out / e / "results.csv") for e in EXPERIMENTS),
                                     args.results / "agreement.md", args.synth, root)
     print(f"\nreport (tables, spread, per object, pictures; open in a browser): {page}")

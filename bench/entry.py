@@ -22,7 +22,7 @@ def report() -> None:
 
 
 def tables() -> None:
-    _module("bench.tables")
+    _module("bench.report.tables")
 
 
 def synth() -> None:
@@ -30,7 +30,7 @@ def synth() -> None:
 
 
 def inspect() -> None:
-    _module("bench.inspect")
+    _module("bench.maroon.inspect_capture")
 
 
 def stress() -> None:
@@ -38,4 +38,4 @@ def stress() -> None:
 
 
 def sweep() -> None:
-    _module("bench.sweep")
+    _module("bench.report.merge")

@@ -1,13 +1,13 @@
 """The one entry point of the methods: `reconstruct(capture, method, freq, prior, device, grid, **params)`.
 
 It selects the configuration's frequencies from the loaded radar frame, builds the prior, checks the combination
-against what the method declares (methods.method) and runs it on the device's backend (methods.backend). Timings
+against what the method declares (methods.method) and runs it on the device's backend (methods.backends). Timings
 exclude file I/O (the capture is already in memory) and one-time kernel compilation (the backend's warm-up runs
 first).
 
-`roi` picks the skips (methods.skips: 'auto' = those measured to agree with the full computation, 'none' = the
+`roi` picks the skips (methods.skips.settings: 'auto' = those measured to agree with the full computation, 'none' = the
 full computation of every method, 'all', or a mapping of settings) and the region of interest they use
-(methods.roi: the capture's metadata mask_bb, the prior, a coarse pass). `extra["roi_px"]` is the number of pixels
+(methods.skips.roi: the capture's metadata mask_bb, the prior, a coarse pass). `extra["roi_px"]` is the number of pixels
 the method evaluated (its last stage).
 """
 from __future__ import annotations
@@ -17,20 +17,21 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from methods.backends import backend_for
+from methods.backends.base import Backend
 from methods.domain.capture import Capture, RadarGrid
-from methods.backend import Backend, backend_for
 from methods.domain.errors import UsageError
-from methods.filtering import DEFAULT_THRESHOLD_DB
-from methods.frequencies import config_indices, select_frequencies
 from methods.fsk import DEFAULT_PRIOR_M
 from methods.method import SENSOR_PRIORS, Frame, Method
-from methods.prior import DEFAULT_FILL, DEFAULT_MAX_JUMP_MM, check_fill, mesh_prior_m, realsense_prior_m
-from methods.prior_image import HostPrior, Prior
+from methods.ops.filtering import DEFAULT_THRESHOLD_DB
+from methods.ops.frequencies import config_indices, select_frequencies
+from methods.ops.timing import StageTimer
+from methods.prior.image import HostPrior, Prior
+from methods.prior.priors import DEFAULT_FILL, DEFAULT_MAX_JUMP_MM, check_fill, mesh_prior_m, realsense_prior_m
 from methods.reconstruction import Reconstruction
 from methods.registry import make_method
-from methods.roi import Roi, full_roi, intersect, roi_from_mask_bb
-from methods.skips import SkipSettings, resolve
-from methods.timing import StageTimer
+from methods.skips.roi import Roi, full_roi, intersect, roi_from_mask_bb
+from methods.skips.settings import SkipSettings, resolve
 
 
 def parse_prior(prior: str | float | None) -> str | float | None:
@@ -63,7 +64,7 @@ def prior_image_m(capture: Capture, source: str, grid: RadarGrid, device: str | 
     `Prior`: rasterised on the backend's device with `keep_on_device` where it can (np.asarray copies it back).
 
     max_jump_mm (RealSense depth-jump rule, None = off), faithful (the reference's construction) and fill (the
-    hole-fill rule, 'delaunay' | 'scanline') as in methods.prior; a jump rule or construction other than the
+    hole-fill rule, 'delaunay' | 'scanline') as in methods.prior.priors; a jump rule or construction other than the
     defaults is built on the host."""
     check_fill(fill)
     backend = backend_for(device)
@@ -113,7 +114,7 @@ def _check_signal(capture: Capture, signal: np.ndarray) -> None:
 
 def capture_roi(capture: Capture, grid: RadarGrid, skips: SkipSettings) -> Roi:
     """The ROI the capture itself gives before any pass: its metadata mask_bb's x/y bounds (`skips.mask_bb`) and z
-    bounds (`skips.mask_bb_depth`) (methods.roi), else the whole grid. The prior's footprint and the coarse pass
+    bounds (`skips.mask_bb_depth`) (methods.skips.roi), else the whole grid. The prior's footprint and the coarse pass
     narrow it inside the methods."""
     roi = full_roi(grid)
     bounds = capture.metadata.mask_bb_m
@@ -132,7 +133,7 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     """Depth map of the capture's loaded radar frame with `method`: a built-in name (bp | 2fsk | 3fsk | mm2fsk |
     mm3fsk), a dotted class path, a `methods.method.Method` subclass or instance (methods.registry).
 
-    freq: a configuration name of `methods.frequencies` (d05 ... d10, full, d05_d10, d1_d10, d2_d10), a list of
+    freq: a configuration name of `methods.ops.frequencies` (d05 ... d10, full, d05_d10, d1_d10, d2_d10), a list of
     target frequencies in GHz (nearest present ones are used), or None for all frequencies.
     prior: 'none', 'realsense', 'photogrammetry', or a scalar depth in metres; a method that needs a scalar prior
     gets `scalar_prior_m` (default 0.40 m) for 'none'. grid: overrides the frame's grid.

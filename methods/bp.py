@@ -9,29 +9,31 @@ Optional search band around a prior: a scalar prior restricts the z range of the
 a per-pixel prior image (ny, nx) samples each pixel at prior + k dz, |k dz| <= band_m (dz = the grid's z step),
 and pixels without a prior stay NaN.
 
-Region of interest and skips (methods.roi, methods.skips): with an ROI, only its pixels and depths are evaluated
+Region of interest and skips (methods.skips.roi, methods.skips.settings): with an ROI, only its pixels and depths are
+evaluated
 (the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device, through
-the point kernels) and, on the CPU with many frequencies, on range-compressed profiles (methods.bp_search,
-methods.range_cpu). With no ROI and no skip
+the point kernels) and, on the CPU with many frequencies, on range-compressed profiles (methods.skips.bp_search,
+methods.backends.cpu_range). With no ROI and no skip
 (`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from methods.backends import backend_for, cpu_range
+from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
-from methods import bp_search, range_cpu
-from methods.backend import Backend, backend_for
-from methods.depth_peak import peak_depth_m
 from methods.domain.errors import UsageError
-from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
 from methods.method import Frame, Method, MethodError
-from methods.prior_image import Prior
+from methods.ops.depth_peak import peak_depth_m
+from methods.ops.filtering import DEFAULT_THRESHOLD_DB, filter_depth
+from methods.ops.timing import StageTimer
+from methods.prior.image import Prior
 from methods.reconstruction import Reconstruction
-from methods.roi import Roi, full_roi, intersect, pixel_pitch_m
-from methods.skips import NONE, SkipSettings
-from methods.timing import StageTimer
+from methods.skips import bp_search
+from methods.skips.roi import Roi, full_roi, intersect, pixel_pitch_m
+from methods.skips.settings import NONE, SkipSettings
 
 DEFAULT_BAND_M = 0.05
 
@@ -67,9 +69,9 @@ def _evaluator(signal, freqs_hz, antennas, backend: Backend, use_range, points_h
     of `points_hull_m`, the corners of every point the search may evaluate), or the backend's sum over
     frequencies (on a Warp backend the sum is taken there and only (N,) values come back)."""
     if use_range:
-        table = range_cpu.range_table(signal, freqs_hz, *range_cpu.path_bounds_m(antennas.tx_m, antennas.rx_m,
+        table = cpu_range.range_table(signal, freqs_hz, *cpu_range.path_bounds_m(antennas.tx_m, antennas.rx_m,
                                                                                  points_hull_m))
-        return lambda points_m: range_cpu.correlate_range_cpu(table, antennas.tx_m, antennas.rx_m, points_m)
+        return lambda points_m: cpu_range.correlate_range_cpu(table, antennas.tx_m, antennas.rx_m, points_m)
     return backend.summed_at_points(signal, freqs_hz, antennas.tx_m, antennas.rx_m)
 
 
@@ -80,7 +82,7 @@ def _box_corners_m(x_m, y_m, z_m) -> np.ndarray:
 
 
 def _plan_of(freqs_hz, antennas, z_m, dz_m, skips: SkipSettings):
-    """Function (x_m, y_m) -> the coarse-to-fine plan of those pixels (methods.bp_search.plan_search) at the
+    """Function (x_m, y_m) -> the coarse-to-fine plan of those pixels (methods.skips.bp_search.plan_search) at the
     nearest depth of z_m."""
     z_near_m = float(np.min(z_m))
     return lambda x_m, y_m: bp_search.plan_search(freqs_hz, antennas, x_m, y_m, z_near_m, dz_m,
@@ -96,7 +98,7 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
     x_img, y_img = grid.pixel_xy_m()
     z_edges = ((len(z_m) > 0 and bool(np.isclose(z_m[0], z_outer[0], atol=1e-9))),
                (len(z_m) > 0 and bool(np.isclose(z_m[-1], z_outer[-1], atol=1e-9))))
-    use_range = skips.bp_range_cpu and backend.host_range_search and range_cpu.worth_it(freqs_hz)
+    use_range = skips.bp_range_cpu and backend.host_range_search and cpu_range.worth_it(freqs_hz)
     pixels = roi.pixels
     n_evaluated, plan = 0, None
     depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
@@ -179,7 +181,8 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
                    skips: SkipSettings = NONE) -> Reconstruction:
     """BP depth map on `grid` from `signal` (n_rx, n_tx, F) at `freqs_hz`; see the module doc for `prior_m`.
 
-    `roi` (methods.roi; None = the whole grid) bounds the pixels and depths evaluated; `skips` (methods.skips)
+    `roi` (methods.skips.roi; None = the whole grid) bounds the pixels and depths evaluated; `skips`
+    (methods.skips.settings)
     switches the coarse ROI, the coarse-to-fine search and CPU range compression (the last two on the CPU only).
     """
     timer = timer or StageTimer()
@@ -203,7 +206,7 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
         z_outer = z_m                          # the depths today's computation searches (grid, or prior band)
         z_m = z_outer[roi.z_indices(z_outer)]
         roi_cuts = not roi.pixels.all() or len(z_m) != len(z_outer)
-        host_range = backend.host_range_search and skips.bp_range_cpu and range_cpu.worth_it(freqs_hz)
+        host_range = backend.host_range_search and skips.bp_range_cpu and cpu_range.worth_it(freqs_hz)
         searched = skips.coarse_roi or skips.bp_coarse_to_fine or host_range
         if searched or (roi_cuts and not backend.prefers_box_volume):
             depth_m, max_proj = _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi, skips,

@@ -9,30 +9,32 @@ pixel with the largest |c1| gives the correction z1 = z0 - dz(that pixel), appli
 correlates every pixel at z1 and corrects each pixel by its own dz. The filter quantity is the magnitude of the
 mean residual phasor over the pairs and both frequencies of the final pass.
 
-Region of interest and skips (methods.roi, methods.skips): both passes run only on the ROI's pixels (pass 1's
+Region of interest and skips (methods.skips.roi, methods.skips.settings): both passes run only on the ROI's pixels
+(pass 1's
 strongest pixel is taken among them), and with `fsk_keep` pass 2 runs only where the filter can keep a pixel
-(methods.keep_skip); depths outside the ROI's depth interval are invalid. With neither (`roi=none`) the
+(methods.skips.keep_skip); depths outside the ROI's depth interval are invalid. With neither (`roi=none`) the
 computation is today's.
 
 Without `fsk_keep`, a backend that holds the frame on a device (`Backend.device_fsk`: Warp) runs both passes,
 the strongest-pixel reduction, the depth and the filter there and copies the maps back once
-(methods.warp_backend.fsk.two_pass, the same expressions).
+(methods.backends.warp.fsk.two_pass, the same expressions).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from methods.backends import backend_for
+from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
-from methods.backend import Backend, backend_for
-from methods.correlate import C_M_PER_S
-from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
-from methods.keep_skip import run_where_kept
 from methods.method import Frame, Method
+from methods.ops.correlate import C_M_PER_S
+from methods.ops.filtering import DEFAULT_THRESHOLD_DB, filter_depth
+from methods.ops.timing import StageTimer
 from methods.reconstruction import Reconstruction
-from methods.roi import Roi, full_roi, pixel_pitch_m
-from methods.skips import NONE, SkipSettings
-from methods.timing import StageTimer
+from methods.skips.keep_skip import run_where_kept
+from methods.skips.roi import Roi, full_roi, pixel_pitch_m
+from methods.skips.settings import NONE, SkipSettings
 
 DEFAULT_PRIOR_M = 0.40
 

@@ -22,28 +22,36 @@ with the paper's 7 ms vs 4 ms. The filter quantity is the magnitude of the mean 
 and the three frequencies of the fine pass.
 
 Region of interest and skips: the passes run only on the ROI's pixels; with `fsk_keep` the coarse step's pass 2
-and the fine pass run only where the filter (on the fine pass's magnitude) can keep a pixel (methods.keep_skip);
+and the fine pass run only where the filter (on the fine pass's magnitude) can keep a pixel (methods.skips.keep_skip);
 depths outside the ROI's depth interval are invalid. With neither (`roi=none`) the computation is today's.
 Without `fsk_keep`, a `device_fsk` backend (Warp) runs every pass, the depth and the filter on its device and copies
-the maps back once (methods.warp_backend.fsk.three_fsk, the same expressions).
+the maps back once (methods.backends.warp.fsk.three_fsk, the same expressions).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from methods.backends import backend_for
+from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
-from methods.backend import Backend, backend_for
-from methods.correlate import C_M_PER_S
-from methods.filtering import DEFAULT_THRESHOLD_DB
-from methods.fsk import (DEFAULT_PRIOR_M, correlate_pixels, device_result, finish, first_pass_z1_m,
-                         mean_phasor_magnitude, second_pass)
-from methods.keep_skip import run_where_kept
+from methods.fsk import (
+    DEFAULT_PRIOR_M,
+    correlate_pixels,
+    device_result,
+    finish,
+    first_pass_z1_m,
+    mean_phasor_magnitude,
+    second_pass,
+)
 from methods.method import Frame, Method
+from methods.ops.correlate import C_M_PER_S
+from methods.ops.filtering import DEFAULT_THRESHOLD_DB
+from methods.ops.timing import StageTimer
 from methods.reconstruction import Reconstruction
-from methods.roi import Roi, full_roi, pixel_pitch_m
-from methods.skips import NONE, SkipSettings
-from methods.timing import StageTimer
+from methods.skips.keep_skip import run_where_kept
+from methods.skips.roi import Roi, full_roi, pixel_pitch_m
+from methods.skips.settings import NONE, SkipSettings
 
 
 def slope_correction_m(phasors: np.ndarray, freqs_hz: np.ndarray) -> np.ndarray:

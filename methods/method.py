@@ -13,7 +13,7 @@ a worked example outside the package: examples/prior_only.py):
 
 `MyMethod(**params)` checks the parameters; `run` gets the `Frame` (the radar frame at the configuration's
 frequencies, antennas, grid, region of interest), the prior (None, a scalar depth in metres, or a
-`methods.prior_image.Prior`), the `methods.backend.Backend` to correlate on, and a `StageTimer`; it returns a
+`methods.prior.image.Prior`), the `methods.backends.Backend` to correlate on, and a `StageTimer`; it returns a
 `Reconstruction`. The harness finds a method by the `_target_` of its Hydra config (configs/method/), e.g.
 `python -m bench method=custom method._target_=mypkg.mymethod.MyMethod`.
 """
@@ -25,16 +25,16 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
-from methods.backend import Backend
 from methods.domain.errors import UsageError
-from methods.filtering import DEFAULT_THRESHOLD_DB
-from methods.prior_image import Prior
+from methods.ops.filtering import DEFAULT_THRESHOLD_DB
+from methods.ops.timing import StageTimer
+from methods.prior.image import Prior
 from methods.reconstruction import Reconstruction
-from methods.roi import Roi
-from methods.skips import SkipSettings
-from methods.timing import StageTimer
+from methods.skips.roi import Roi
+from methods.skips.settings import SkipSettings
 
 PRIOR_KINDS = ("none", "scalar", "realsense", "photogrammetry")
 SENSOR_PRIORS = ("realsense", "photogrammetry")
@@ -50,9 +50,9 @@ class Frame:
     """What a method reconstructs from: one radar frame at the configuration's frequencies, and where to look.
 
     signal (n_rx, n_tx, F) complex, freqs_hz (F,) ascending as selected, antennas in radar space (m), grid the
-    pixel (and BP's voxel) grid, roi the region the capture allows (methods.roi; the whole grid when the skips say
-    so), skips the computation shortcuts asked for (methods.skips), threshold_db the depth filter (dB below the
-    strongest pixel's magnitude, None = off; methods.filtering), name the capture's name (for messages)."""
+    pixel (and BP's voxel) grid, roi the region the capture allows (methods.skips.roi; the whole grid when the skips say
+    so), skips the computation shortcuts asked for (methods.skips.settings), threshold_db the depth filter (dB below the
+    strongest pixel's magnitude, None = off; methods.ops.filtering), name the capture's name (for messages)."""
 
     signal: np.ndarray
     freqs_hz: np.ndarray

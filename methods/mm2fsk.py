@@ -1,28 +1,29 @@
 """MM-2FSK (paper section II-B): 2FSK with a per-pixel depth prior from an optical sensor, one pass.
 
-Only pixels that have a prior (finite in `prior_depth_m`, see `methods.prior`) are correlated, each at its own
+Only pixels that have a prior (finite in `prior_depth_m`, see `methods.prior.priors`) are correlated, each at its own
 prior depth; depth = prior - c angle(c2 conj(c1)) / (4 pi (f2 - f1)). Pixels without a prior stay NaN. The filter
 quantity is the magnitude of the mean residual phasor over pairs and both frequencies (with
 `filter_quantity='first'`, the reference's: the first frequency's), thresholded relative to the maximum over the
 correlated pixels.
 
-Region of interest (methods.roi): only pixels with a prior inside the ROI are correlated, and depths outside its
+Region of interest (methods.skips.roi): only pixels with a prior inside the ROI are correlated, and depths outside its
 depth interval are invalid; the prior's footprint is itself the ROI this method always had.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from methods.backends import backend_for
+from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
-from methods.backend import Backend, backend_for
-from methods.filtering import DEFAULT_THRESHOLD_DB, filter_depth
 from methods.fsk import FILTER_QUANTITIES, correlate_pixels, depth_correction_m, filter_magnitude, roi_depth_m
 from methods.method import Frame, Method
-from methods.prior_image import HostPrior, Prior
+from methods.ops.filtering import DEFAULT_THRESHOLD_DB, filter_depth
+from methods.ops.timing import StageTimer
+from methods.prior.image import HostPrior, Prior
 from methods.reconstruction import Reconstruction
-from methods.roi import Roi
-from methods.timing import StageTimer
+from methods.skips.roi import Roi
 
 
 def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid,

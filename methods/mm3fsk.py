@@ -25,14 +25,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from methods.backend import Backend
-from methods.filtering import filter_depth, keep_mask
+from methods.backends.base import Backend
 from methods.fsk import correlate_pixels, depth_correction_m, mean_phasor_magnitude, roi_depth_m
 from methods.fsk3 import slope_correction_m
 from methods.method import Frame, Method
-from methods.prior_image import Prior
+from methods.ops.filtering import filter_depth, keep_mask
+from methods.ops.timing import StageTimer
+from methods.prior.image import Prior
 from methods.reconstruction import Reconstruction
-from methods.timing import StageTimer
 
 
 def coarse_pair(freqs_hz: np.ndarray) -> list[int]:

@@ -18,7 +18,7 @@ computed on another grid is resampled first, metrics.resample):
 `faithful=True` reproduces the reference code's C_g, C_s, P and P_e instead (README "The faithful profile"):
 * ground truth sampled at MAROON's shifted positions K^-1 (u + 0.5, v + 0.5) (up to one pixel off the pixel
   centres at the far edges), triangulated with the reference's quad rule, restricted to mask_bb for C_g / C_s;
-* radar points triangulated with the reference's quad rule (metrics.triangulation 'maroon': three-valid quads
+* radar points triangulated with the reference's quad rule (methods.domain.lattice 'maroon': three-valid quads
   decided by the image's corner pixels), kept where the depth is valid and inside mask_bb (the source mask);
 * P: every such point maps to GT pixel floor(K p) (two columns share a GT column); it counts only where the radar's
   source mask is set at that destination pixel; there e = 1000 z - D_gt mm with D_gt the splat of the triangulated
@@ -34,14 +34,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from methods.domain.transforms import apply_transform
 from methods.domain.capture import Capture, RadarGrid
-from bench.maroon import reference_mask_bb_m
+from methods.domain.lattice import triangulated_vertices
+from methods.domain.transforms import apply_transform
 from metrics.chamfer import PointSet, nearest_distances_m, one_sided_chamfer_m
 from metrics.groundtruth import rasterise_depth_m
-from metrics.masks import (MAROON_RADAR_PITCH_MM, close_mask, erode_mask, erosion_kernel_mm, inside_mask_bb,
-                           kernel_px_for_pitch, radar_erosion_kernel_px)
-from metrics.triangulation import triangulated_vertices
+from metrics.masks import (
+    MAROON_RADAR_PITCH_MM,
+    close_mask,
+    erode_mask,
+    erosion_kernel_mm,
+    inside_mask_bb,
+    kernel_px_for_pitch,
+    radar_erosion_kernel_px,
+    reference_mask_bb_m,
+)
 
 TRIANGULATION_THRESHOLD_M = 0.01
 METRIC_COLUMNS = ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm")
@@ -56,7 +63,7 @@ class ReferenceGroundTruth:
     depth_m: np.ndarray           # (ny, nx) at K^-1 (u + 0.5, v + 0.5), NaN = no surface
     points: PointSet              # its triangulated vertices ('maroon' quad rule) inside mask_bb, metres
     splat_mm: np.ndarray          # (ny, nx) the triangulated vertices splatted at floor(K p), mm; 0 = hole
-    mask_bb_m: dict[str, float]   # with the viewer's legacy precedence (bench.maroon.reference_mask_bb_m)
+    mask_bb_m: dict[str, float]   # with the viewer's legacy precedence (metrics.masks.reference_mask_bb_m)
 
 
 @dataclass
@@ -109,7 +116,8 @@ def _reference_ground_truth(depth_m: np.ndarray, grid: RadarGrid, mask_bb_m: dic
 
 def pixel_pitch_mm(grid: RadarGrid) -> float:
     """The finer of the two lateral pixel pitches of `grid` in millimetres."""
-    pitches = [(hi - lo) / (n - 1) for lo, hi, n in zip(grid.bb_min_m[:2], grid.bb_max_m[:2], grid.size[:2]) if n > 1]
+    pitches = [(hi - lo) / (n - 1) for lo, hi, n in zip(grid.bb_min_m[:2], grid.bb_max_m[:2], grid.size[:2],
+                                                        strict=False) if n > 1]
     return 1000.0 * min(pitches) if pitches else MAROON_RADAR_PITCH_MM
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from methods.domain.capture import Metadata
+
 MAROON_RADAR_PITCH_MM = 1.0   # MAROON's radar image: 301 pixels over 0.30 m
 _MIN_KEPT_PX = 10             # MAROON retries with a smaller kernel while the eroded mask keeps <= 10 pixels
 
@@ -23,6 +25,16 @@ def inside_mask_bb(points_m: np.ndarray, mask_bb_m: dict[str, float]) -> np.ndar
         if f"{axis}max" in mask_bb_m:
             keep &= points_m[:, column] <= mask_bb_m[f"{axis}max"]
     return keep
+
+
+def reference_mask_bb_m(metadata: Metadata) -> dict[str, float]:
+    """`mask_bb` as the reference viewer applies it (faithful profile): a legacy `mask_3d_threshold` sets zmax
+    even where `mask_bb.zmax` is given too (the viewer migrates the threshold over it); read_metadata keeps the
+    explicit `mask_bb.zmax`, the newer field, instead."""
+    mask_bb_m = dict(metadata.mask_bb_m)
+    if "mask_3d_threshold" in metadata.raw:            # validated by read_metadata
+        mask_bb_m["zmax"] = float(metadata.raw["mask_3d_threshold"])
+    return mask_bb_m
 
 
 def radar_erosion_kernel_px(mask_erosion: int) -> int:

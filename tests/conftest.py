@@ -12,14 +12,13 @@ import dataclasses
 
 import pytest
 
-
 SYNTH_FIXTURE_CAPTURES = (("01_plate", 30), ("03_sphere", 30))
 
 
 @pytest.fixture(scope="session")
 def synth_root(tmp_path_factory):
     """Dataset root with the default-config captures listed in SYNTH_FIXTURE_CAPTURES."""
-    from bench.synth import generate_capture   # imported here: the GPU machine runs tests without Open3D
+    from bench.synth import generate_capture  # imported here: the GPU machine runs tests without Open3D
 
     root = tmp_path_factory.mktemp("synth_default")
     for object_name, distance_cm in SYNTH_FIXTURE_CAPTURES:

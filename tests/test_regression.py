@@ -15,8 +15,8 @@ import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
 
-from bench.app import CONFIG_DIR, run
-from bench.tables import RESULTS_DIR, METRICS_CM
+from bench.harness.app import CONFIG_DIR, run
+from bench.report.tables import METRICS_CM, RESULTS_DIR
 
 ABS_TOL_CM = 0.05
 REL_TOL = 0.10

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from bench import cli
-from bench.stress import precision   # the other experiments import Open3D (via the generator): imported in run()
+from bench.stress import precision  # the other experiments import Open3D (via the generator): imported in run()
 
 FULL = {"distances_m": (0.2, 0.3, 0.4, 0.5, 0.6), "grid_sizes": (11, 61, 151), "n_ref": 48,
         "snrs_db": tuple(range(-10, 45, 5)), "noise_configs": ("d05", "d10"),
@@ -104,7 +104,7 @@ def add_precision_rows(out: Path, extra_csv: Path) -> None:
     merged.to_csv(out / "precision.csv", index=False, float_format="%.6g")
     results["precision"] = merged.to_dict("records")
     timings = pd.read_csv(out / "timings.csv")
-    _report(out, results, dict(zip(timings.experiment, timings.seconds)), quick=False)
+    _report(out, results, dict(zip(timings.experiment, timings.seconds, strict=False)), quick=False)
 
 
 DEFAULT_OUT = Path("outputs/stress")

@@ -18,18 +18,18 @@ import os
 import shutil
 import traceback
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
-from bench import maroon
-from methods.domain.capture import Capture
-from methods.domain.errors import DatasetError
+from bench.maroon import reader
 from bench.stress import hostile_inputs
 from methods import reconstruct
-from methods.frequencies import config_indices
+from methods.domain.capture import Capture
+from methods.domain.errors import DatasetError
 from methods.mm2fsk import reconstruct_mm2fsk
+from methods.ops.frequencies import config_indices
 from metrics.evaluate import METRIC_COLUMNS, evaluate, ground_truth
 
 PWNED = "hostile_pickle_ran"            # a file the malicious pickles would create if they were executed
@@ -121,7 +121,7 @@ def _write(relative: str, build: Callable[[], bytes]) -> Callable[[Path], None]:
 
 
 # issue 18's kinds, built by bench.stress.hostile_inputs (the file-system kinds - FIFOs, devices, links - are in
-# tests/test_hostile_fs.py: this in-process chain reads every dataset file to check it is unchanged)
+# tests/bench/maroon/test_hostile_fs.py: this in-process chain reads every dataset file to check it is unchanged)
 FILE_CASES.update({
     "pickle_billion_laughs": _write("radar_*/calibrated_data/000000.npy",
                                     lambda: hostile_inputs.npy_pickle(hostile_inputs.billion_laughs_pickle())),
@@ -180,7 +180,7 @@ def _outcome(valid_px: int, metrics: dict) -> str:
 
 
 def _chain(capture_dir: Path, change: Callable[[Capture], Capture] | None) -> dict:
-    capture = maroon.read_capture(capture_dir)
+    capture = reader.read_capture(capture_dir)
     if change is not None:
         capture = change(capture)
     grid = coarse_grid(capture)
@@ -192,7 +192,7 @@ def _chain(capture_dir: Path, change: Callable[[Capture], Capture] | None) -> di
 
 def _one_pixel_object(capture_dir: Path) -> dict:
     """MM-2FSK with a prior on exactly one radar pixel (an object one pixel wide)."""
-    capture = maroon.read_capture(capture_dir)
+    capture = reader.read_capture(capture_dir)
     grid = coarse_grid(capture)
     prior_m = np.full(grid.image_shape, np.nan)
     prior_m[30, 30] = capture.metadata.distance_m

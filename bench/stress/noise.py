@@ -22,8 +22,9 @@ import numpy as np
 
 from bench.stress.scenes import antennas, config_freqs_hz, frame, noise_power, pixel_grid, plate_points_m
 from bench.synth.radar_model import noise_frame
-from methods.correlate import C_M_PER_S, correlate
+from methods.backends import correlate
 from methods.mm2fsk import reconstruct_mm2fsk
+from methods.ops.correlate import C_M_PER_S
 
 TARGET_Z_M = 0.30
 N_PAIRS = 94 * 94

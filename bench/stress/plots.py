@@ -9,7 +9,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after choosing the backend
 import pandas as pd  # noqa: E402
 
-
 KNOB_LABELS = {"disparity_sigma_px": "stereo noise: disparity sigma (px)",
                "dropout_fraction": "holes: dropout fraction (share of pixels)",
                "extrinsic_error_mm": "extrinsic error: translation (mm)",
@@ -52,7 +51,7 @@ def plot_wrapping(rows: list[dict], path: Path) -> None:
     methods = list(dict.fromkeys(df.method))
     fig, axes = plt.subplots(1, len(methods), figsize=(4.6 * len(methods), 4.0), sharey=True, squeeze=False,
                              layout="constrained")
-    for ax, method in zip(axes[0], methods):
+    for ax, method in zip(axes[0], methods, strict=False):
         for config, part in df[df.method == method].groupby("config", sort=False):
             line, = ax.plot(part.offset_ratio, part.success_rate, label=f"{config} success", lw=1.4)
             ax.plot(part.offset_ratio, part["yield"], color=line.get_color(), ls=":", lw=1.2,
@@ -96,7 +95,7 @@ def plot_prior(rows: list[dict], path: Path) -> None:
     knobs = list(dict.fromkeys(df.knob))
     fig, axes = plt.subplots(1, len(knobs), figsize=(4 * len(knobs), 4.0), sharey=True, squeeze=False,
                              layout="constrained")
-    for ax, knob in zip(axes[0], knobs):
+    for ax, knob in zip(axes[0], knobs, strict=False):
         part = df[df.knob == knob].groupby(["config", "value"])["yield"].mean().unstack("config")
         x = part.index.to_numpy()
         positions = range(len(x))

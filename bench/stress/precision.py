@@ -12,14 +12,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.stress.scenes import (MAROON_FREQS_HZ, TABLE1_CONFIGS, THREE_FREQ_CONFIGS, antennas, frame,
-                                 pixel_grid, plate_points_m)
-from methods.backend import resolve_device
-from methods.correlate import correlate, correlate_reference
-from methods.filtering import keep_mask
-from methods.frequencies import config_indices
+from bench.stress.scenes import (
+    MAROON_FREQS_HZ,
+    TABLE1_CONFIGS,
+    THREE_FREQ_CONFIGS,
+    antennas,
+    frame,
+    pixel_grid,
+    plate_points_m,
+)
+from methods.backends import correlate, resolve_device
 from methods.fsk import depth_correction_m
 from methods.fsk3 import slope_correction_m
+from methods.ops.correlate import correlate_reference
+from methods.ops.filtering import keep_mask
+from methods.ops.frequencies import config_indices
 
 CONFIGS = TABLE1_CONFIGS + THREE_FREQ_CONFIGS
 GRID_HALF_M = 0.02

@@ -1,7 +1,7 @@
 """Analytic in-memory stress scenes: a point target and a flat plate as radar frames on the packaged antennas.
 
 Frames follow the generator's signal model (`bench.synth.simulate_frame`, path loss included) at frequencies
-picked from the MAROON sweep `linspace(72, 82, 128)` GHz by the named configurations of `methods.frequencies`.
+picked from the MAROON sweep `linspace(72, 82, 128)` GHz by the named configurations of `methods.ops.frequencies`.
 """
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ from functools import cache
 
 import numpy as np
 
-from methods.domain.antennas import AntennaArray
-from bench.antennas import load_antenna_array
-from methods.domain.capture import RadarGrid
+from bench.maroon.antennas import load_antenna_array
 from bench.synth import simulate_frame
-from methods.frequencies import config_indices, max_unambiguous_depth_m
+from methods.domain.antennas import AntennaArray
+from methods.domain.capture import RadarGrid
+from methods.ops.frequencies import config_indices, max_unambiguous_depth_m
 
 MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 TABLE1_CONFIGS = ("d05", "d1", "d2", "d4", "d8", "d10")

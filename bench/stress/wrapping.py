@@ -20,13 +20,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from bench.stress.scenes import MAROON_FREQS_HZ, antennas, config_freqs_hz, dd_max_m, frame, pixel_grid, plate_points_m
 from methods.domain.capture import RadarGrid
-from bench.stress.scenes import MAROON_FREQS_HZ, antennas, config_freqs_hz, dd_max_m, frame, pixel_grid, \
-    plate_points_m
-from methods.frequencies import config_indices
 from methods.fsk import reconstruct_2fsk
 from methods.fsk3 import reconstruct_3fsk
 from methods.mm2fsk import reconstruct_mm2fsk
+from methods.ops.frequencies import config_indices
 
 PLATE_Z_M = 0.40
 CASES = (("2fsk", "d05"), ("2fsk", "d2"), ("2fsk", "d10"), ("3fsk", "d05_d10"),

@@ -11,9 +11,9 @@ import time
 
 from bench import cli
 from bench.synth.config import DEFAULT_PRESET, DISTANCE_RANGE_CM, PRESETS, SynthConfig, preset
+from bench.synth.generate import DEFAULT_DISTANCES_CM, CaptureResult, generate_catalogue
 from bench.synth.motion import MOTIONS
 from bench.synth.motion import validate as validate_motion
-from bench.synth.generate import DEFAULT_DISTANCES_CM, CaptureResult, generate_catalogue
 from bench.synth.scenes import CATALOGUE
 
 

@@ -56,7 +56,8 @@ class SynthConfig:
     wall_distance_m: float = 1.0             # wall behind the objects (depth background, radar clutter plane)
     # Effects of the realistic preset (bench/synth/README.md, "Effects"); every default below is the ideal generator.
     # depth camera (D435 active stereo)
-    camera_materials: bool = False           # translucent plastic seen behind its surface, specular-metal holes/outliers
+    # translucent plastic seen behind its surface, specular-metal holes/outliers
+    camera_materials: bool = False
     edge_fattening_px: int = 0               # foreground spreads this far over depth edges (mixed and flying pixels)
     flying_pixel_fraction: float = 0.3       # share of the edge band given a depth between the two sides
     slant_bias_px: float = 0.0               # disparity bias * tan(incidence): depth bias on slanted surfaces
@@ -72,7 +73,8 @@ class SynthConfig:
     clutter_model: str = "points"            # "points": today's point clutter; "scene": wall image + the object's mount
     wall_reflection: float = 0.25            # |Gamma| of the back wall at 77 GHz (plasterboard, ITU-R P.2040-3)
     mount: bool = False                      # a wooden post below the object (seen by both sensors, not ground truth)
-    noise_model: str = "snr"                 # "snr": snr_db per sample; "datasheet": thermal noise k T F B vs link budget
+    # "snr": snr_db per sample; "datasheet": thermal noise k T F B vs link budget
+    noise_model: str = "snr"
     tx_power_dbm: float = 0.0                # per transmitter (datasheet model)
     element_gain_dbi: float = 6.0            # per antenna element
     noise_figure_db: float = 12.0            # receiver

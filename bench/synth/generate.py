@@ -15,9 +15,9 @@ import os
 import shutil
 import time
 import uuid
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable
 
 import numpy as np
 
@@ -179,7 +179,10 @@ def _ensure_locked(root: Path, object_name: str, distance_cm: int, config: Synth
     return CaptureResult(target, "generated", seconds)
 
 
-def ensure_capture(root, object_name: str, distance_cm: int, config: SynthConfig = SynthConfig(),
+DEFAULT_CONFIG = SynthConfig()     # frozen: one shared default instance
+
+
+def ensure_capture(root, object_name: str, distance_cm: int, config: SynthConfig = DEFAULT_CONFIG,
                    force: bool = False, on_wait: Callable[[], None] | None = None) -> CaptureResult:
     """Generate one capture unless an up-to-date one (same hash in the manifest) already exists.
 
@@ -192,14 +195,14 @@ def ensure_capture(root, object_name: str, distance_cm: int, config: SynthConfig
         return _ensure_locked(root, object_name, int(distance_cm), config, force)
 
 
-def generate_capture(root, object_name: str, distance_cm: int, config: SynthConfig = SynthConfig(),
+def generate_capture(root, object_name: str, distance_cm: int, config: SynthConfig = DEFAULT_CONFIG,
                      force: bool = False) -> Path:
     """Path of the capture `<root>/<object_name>/<distance_cm>`, generated if missing or stale."""
     return ensure_capture(root, object_name, distance_cm, config, force).path
 
 
 def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, objects: Iterable[str] | None = None,
-                       config: SynthConfig = SynthConfig(), force: bool = False,
+                       config: SynthConfig = DEFAULT_CONFIG, force: bool = False,
                        log: Callable[[CaptureResult], None] | None = None,
                        on_wait: Callable[[], None] | None = None) -> list[CaptureResult]:
     """Ensure every (object, distance) capture; `objects=None` means the whole catalogue.

@@ -5,7 +5,7 @@ the relative permittivity at W band; the one-way power transmission through a wa
 interfaces, loss neglected for thin walls); the surface roughness (m) widens the quasi-specular lobe
 (`lobe_deg`: half-width of the return around the mirror direction, standing for the spread of the surface's
 slopes at the wavelength scale: the least constrained values here, no W-band measurement of these objects exists;
-the ablation of `python -m bench.agreement` shows their weight) and jitters the phase.
+the ablation of `python -m bench.report.agreement` shows their weight) and jitters the phase.
 Permittivities: metal (perfect conductor); PE/PP plastics eps_r 2.3-2.4 and dry wood 1.99 (ITU-R P.2040-3,
 Table 3, "wood" valid 0.001-100 GHz); cardboard ~1.9 and expanded polystyrene foam ~1.03 at 77-80 GHz (typical
 values of mm-wave material measurements, e.g. the radome / packaging literature); foam is nearly transparent.

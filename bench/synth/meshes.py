@@ -70,7 +70,8 @@ def extrude_strip(x_m, z_front_m, z_back_m, height_m: float, max_segment_m: floa
         return np.stack([xz[:, 0], np.broadcast_to(y, len(xz)), xz[:, 1]], 1)
 
     p0, p1 = polygon, np.roll(polygon, -1, axis=0)
-    sides = [_quads(lift(p0, y0), lift(p1, y0), lift(p1, y1), lift(p0, y1)) for y0, y1 in zip(y_levels, y_levels[1:])]
+    sides = [_quads(lift(p0, y0), lift(p1, y0), lift(p1, y1), lift(p0, y1)) for y0, y1 in zip(y_levels, y_levels[1:],
+                                                                                              strict=False)]
     side_out = np.stack([outward_xz[:, 0], np.zeros(len(edge)), outward_xz[:, 1]], 1)
     sides = _orient(np.concatenate(sides), np.tile(side_out, (2 * (len(y_levels) - 1), 1)))
     caps = []

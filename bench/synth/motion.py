@@ -6,9 +6,9 @@ RealSense frames are stamped at the same 30 Hz instants, as before), `lateral` (
 position in the middle of the sequence. A moving sequence has radar frames every `radar_period_s` and RealSense
 frames at 30 Hz starting REALSENSE_DELAY_S after the first radar frame, over the same span, so each radar frame
 has a RealSense frame within half a RealSense period of it but not at the same instant: the prior the pairing
-finds (bench.frames) saw the object up to ~17 ms earlier or later. The ground truth per radar frame is the mesh
+finds (bench.maroon.frames) saw the object up to ~17 ms earlier or later. The ground truth per radar frame is the mesh
 moved to where the object was at the radar's timestamp: `photogrammetry/poses/NNNNNN.json` holds that frame's
-`photogrammetry2radar` (read by bench.maroon).
+`photogrammetry2radar` (read by bench.maroon.reader).
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ import numpy as np
 MOTIONS = {"static": None, "lateral": (1.0, 0.0, 0.0), "approach": (0.0, 0.0, -1.0)}
 REALSENSE_PERIOD_NS = 33_333_333        # 30 Hz
 REALSENSE_DELAY_S = 0.007               # the first RealSense frame after the first radar frame
-POSES_FOLDER = "poses"                  # bench.maroon.POSES_FOLDER
+POSES_FOLDER = "poses"                  # bench.maroon.reader.POSES_FOLDER
 
 
 @dataclass(frozen=True)

@@ -72,10 +72,11 @@ def claim(root: Path) -> None:
 
 def verify_manifest(root: Path) -> None:
     """ForeignRootError unless the manifest of `root` accounts for everything on disk: it is a regular file inside
-    the root (bounded JSON, bench.safe_io) of the form {"captures": {"<object>/<distance>": {...}}}, every capture
+    the root (bounded JSON, bench.maroon.safe_io) of the form {"captures": {"<object>/<distance>": {...}}}, every
+    capture
     folder `<object>/<distance>` is one it lists, and nothing else but generator leftovers is there."""
-    from bench.jsonio import loads_bounded
-    from bench.safe_io import read_bytes
+    from bench.maroon.jsonio import loads_bounded
+    from bench.maroon.safe_io import read_bytes
 
     path = root / MANIFEST_NAME
     try:

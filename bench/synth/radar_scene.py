@@ -6,17 +6,27 @@ point clutter scaled to `clutter_to_signal_db`, noise at `snr_db` per sample.
 """
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
-from bench.antennas import load_antenna_array
+from bench.maroon.antennas import load_antenna_array
 from bench.synth import multipath
 from bench.synth.config import SynthConfig, frequencies_hz
 from bench.synth.materials import MATERIALS
-from bench.synth.radar_model import (channel_gains, clutter_frame, leg_gains, material_amplitudes, noise_frame,
-                                     roughen, roughen_by_part, simulate_frame, surface_amplitudes, thermal_noise,
-                                     wall_frame)
+from bench.synth.radar_model import (
+    channel_gains,
+    clutter_frame,
+    leg_gains,
+    material_amplitudes,
+    noise_frame,
+    roughen,
+    roughen_by_part,
+    simulate_frame,
+    surface_amplitudes,
+    thermal_noise,
+    wall_frame,
+)
 from bench.synth.sampling import SurfaceSamples, back_wall_samples, visible_samples
 from bench.synth.scenes import Scene
 

@@ -45,7 +45,7 @@ def bisect_triangles(tris_m: np.ndarray, max_edge_m: float) -> np.ndarray:
 def visible_samples(part_tris_m: list[np.ndarray], spacing_m: float,
                     viewpoint_m=(0.0, 0.0, 0.0)) -> SurfaceSamples:
     """Samples of all parts' surfaces that face `viewpoint_m` and are not occluded (any part can occlude)."""
-    import open3d as o3d   # here only: the signal model (`simulate_frame`) must import without Open3D
+    import open3d as o3d  # here only: the signal model (`simulate_frame`) must import without Open3D
 
     viewpoint_m = np.asarray(viewpoint_m, dtype=np.float64)
     scene = o3d.t.geometry.RaycastingScene()
@@ -59,7 +59,7 @@ def visible_samples(part_tris_m: list[np.ndarray], spacing_m: float,
         fine_normals, fine_areas = triangle_normals(fine)
         centroids = fine.mean(axis=1)
         chunks.append((centroids, fine_normals, fine_areas, np.full(len(fine), index)))
-    points, normals, areas, part = (np.concatenate(c) for c in zip(*chunks))
+    points, normals, areas, part = (np.concatenate(c) for c in zip(*chunks, strict=False))
     to_point = points - viewpoint_m
     distance = np.linalg.norm(to_point, axis=1)
     rays = np.concatenate([np.broadcast_to(viewpoint_m, points.shape), to_point / distance[:, None]], 1)
@@ -78,9 +78,9 @@ def back_wall_samples(part_tris_m: list[np.ndarray], transmissive: list[bool], s
     import open3d as o3d
 
     viewpoint_m = np.asarray(viewpoint_m, dtype=np.float64)
-    opaque = [tris for tris, clear in zip(part_tris_m, transmissive) if not clear]
+    opaque = [tris for tris, clear in zip(part_tris_m, transmissive, strict=False) if not clear]
     chunks = []
-    for index, (tris, clear) in enumerate(zip(part_tris_m, transmissive)):
+    for index, (tris, clear) in enumerate(zip(part_tris_m, transmissive, strict=False)):
         if not clear:
             continue
         normals, _ = triangle_normals(tris)
@@ -90,7 +90,7 @@ def back_wall_samples(part_tris_m: list[np.ndarray], transmissive: list[bool], s
         chunks.append((fine.mean(axis=1), -fine_normals, fine_areas, np.full(len(fine), index)))
     if not chunks:
         return SurfaceSamples(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int64))
-    points, normals, areas, part = (np.concatenate(c) for c in zip(*chunks))
+    points, normals, areas, part = (np.concatenate(c) for c in zip(*chunks, strict=False))
     if not opaque:
         return SurfaceSamples(points, normals, areas, part)
     scene = o3d.t.geometry.RaycastingScene()

@@ -7,8 +7,8 @@ step block), cardboard (corrugated sheet, the far box of 08); foam (|Gamma| 0.00
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -39,7 +39,7 @@ class Scene:
         """Triangles of the ground truth (the object's parts, without the mount)."""
         return np.concatenate([p.tris_m for p in self.parts if p.ground_truth])
 
-    def with_mount(self) -> "Scene":
+    def with_mount(self) -> Scene:
         """This scene standing on a wooden post (2 x 2 cm) from its lowest point down to y = -0.30 m."""
         tris = self.tris_m
         bottom_y, centre = tris[..., 1].min(), tris.reshape(-1, 3).mean(axis=0)

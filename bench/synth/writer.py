@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from methods.domain.capture import RadarGrid
 from bench.synth import photogrammetry
 from bench.synth.config import F_HIGH_GHZ, F_LOW_GHZ
 from bench.synth.meshes import indexed
+from methods.domain.capture import RadarGrid
 
 RADAR_HALF_WIDTH_M = 0.15
 RADAR_HALF_DEPTH_M = 0.10

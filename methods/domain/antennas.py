@@ -1,4 +1,4 @@
-"""The antenna array of a radar frame (radar space, metres; the QAR50 files are read by bench.antennas)."""
+"""The antenna array of a radar frame (radar space, metres; the QAR50 files are read by bench.maroon.antennas)."""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -1,5 +1,5 @@
 """4x4 homogeneous transforms between MAROON's frames (radar, realsense, photogrammetry, ...): MAROON's rule for
-finding one, and applying one to points. bench.alignment reads them from a capture's alignment file."""
+finding one, and applying one to points. bench.maroon.alignment reads them from a capture's alignment file."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,0 +1,69 @@
+"""PNG/JPEG image I/O for depth images and masks (Pillow), bounded, with errors that name the file.
+
+A dataset image is read through bench.maroon.safe_io (a regular file inside the dataset, within `image_bytes`); its
+width and height are taken from the header and refused beyond `image_pixels` before any pixel is decoded
+(Pillow's own decompression-bomb check, warning and error alike, ends in the same one-line DatasetError).
+"""
+from __future__ import annotations
+
+import io
+import warnings
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, UnidentifiedImageError
+
+from bench.maroon import safe_io
+from bench.maroon.limits import current_limits, too_large
+from methods.domain.errors import DatasetError
+
+_UINT16_MODES = {"I;16", "I;16B", "I;16L", "I"}
+
+
+def _open(path: Path, formats: tuple[str, ...] = ("PNG",)) -> Image.Image:
+    data = safe_io.read_bytes(path, "image")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            image = Image.open(io.BytesIO(data), formats=list(formats))
+            width, height = image.size
+            if width * height > current_limits().image_pixels:
+                raise DatasetError(path, too_large(f"the image's pixel count ({width}x{height})", width * height,
+                                                   "image_pixels"))
+            image.load()
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning) as err:
+        raise DatasetError(path, f"image refused as a decompression bomb ({err}); "
+                                 f"at most {current_limits().image_pixels:,} pixels are read") from None
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError, EOFError, MemoryError) as err:
+        raise DatasetError(path, f"not a readable image ({err})") from None
+    return image
+
+
+def read_uint16_png(path: Path) -> np.ndarray:
+    """A single-channel 16-bit PNG (e.g. depth in millimetres) as a (H, W) uint16 array."""
+    image = _open(path)
+    if image.mode not in _UINT16_MODES:
+        raise DatasetError(path, f"expected a single-channel 16-bit image, found mode '{image.mode}'")
+    values = np.asarray(image)
+    if values.dtype != np.uint16:
+        if values.min(initial=0) < 0 or values.max(initial=0) > 65535:
+            raise DatasetError(path, "pixel values outside the uint16 range")
+        values = values.astype(np.uint16)
+    return values
+
+
+def read_binary_mask(path: Path) -> np.ndarray:
+    """A mask image as (H, W) bool: any channel value > 0 is foreground (MAROON_FORMAT.md 3.1)."""
+    values = np.asarray(_open(path))
+    return values.any(axis=2) if values.ndim == 3 else values > 0
+
+
+PNG_COMPRESS_LEVEL = 1     # zlib level of the PNGs a run writes: half the encoding time of the default 6 (mostly
+                           # empty depth maps grow ~1.4x); the pixels are the same
+
+
+def write_uint16_png(path: Path, values: np.ndarray) -> None:
+    """Write a (H, W) uint16 array as a 16-bit PNG."""
+    if values.dtype != np.uint16 or values.ndim != 2:
+        raise ValueError(f"expected a 2-D uint16 array, got {values.dtype} {values.shape}")
+    Image.fromarray(values).save(path, compress_level=PNG_COMPRESS_LEVEL)

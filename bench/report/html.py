@@ -1,0 +1,272 @@
+"""`python -m bench.report SWEEP_ROOT [SWEEP_ROOT ...] [--out FILE] [--no-pictures]`: one self-contained HTML page.
+
+For every sweep root (e.g. `outputs/demo/table2` and `outputs/demo/table3`): the table of means with its success
+counts (`ok`), the spread across captures (median and interquartile range of every metric over each row's
+successful captures), a per-object view (P per row and capture), the runtime-versus-error plot, the paper-style
+pictures per capture (bench.report.pictures: point clouds over the ground truth, depth / magnitude / signed-error
+panels;
+PLY files beside them), and per cell its Hydra overrides, full configuration, code version, device and host.
+Images are embedded (base64), so the page can be mailed or archived alone; nothing is loaded from the network.
+Default output: `SWEEP_ROOT/report.html` (one root) or `report.html` in the roots' common folder. Pictures are
+written under `SWEEP_ROOT/pictures/` (several seconds per capture; `--no-pictures` leaves them out).
+"""
+from __future__ import annotations
+
+import argparse
+import base64
+import html
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from bench import cli
+
+QUANTILES = (0.25, 0.5, 0.75)
+_STYLE = """
+body { font-family: system-ui, sans-serif; margin: 1.5em; max-width: 1500px; color: #222; }
+table { border-collapse: collapse; margin: 0.6em 0 1.2em; font-size: 0.85em; }
+th, td { border: 1px solid #ccc; padding: 0.2em 0.5em; text-align: right; }
+th { background: #f2f2f2; } td:first-child, th:first-child { text-align: left; }
+img { max-width: 100%; border: 1px solid #ddd; margin: 0.3em 0; }
+pre { background: #f7f7f7; padding: 0.5em; font-size: 0.8em; overflow-x: auto; }
+.caption { font-size: 0.85em; color: #444; max-width: 1100px; }
+nav a { margin-right: 1em; }
+"""
+# After loading, the page notes on <body> how many of its images decoded (read by tests/bench/report/test_report.py
+# through a
+# headless browser; a reader sees nothing). No other script, no network access.
+_LOADED_CHECK = ("<script>window.addEventListener('load', () => { const images = [...document.images]; "
+                 "document.body.dataset.images = images.length; document.body.dataset.imagesLoaded = "
+                 "images.filter(i => i.complete && i.naturalWidth > 0).length; });</script>")
+
+
+def _image(path: Path, alt: str) -> str:
+    """An <img> with the PNG embedded as a data URI."""
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
+
+
+def _job_dirs(root: Path) -> list[Path]:
+    """The sweep's job folders (`<number>_<cell>/` with a results.csv), in job order."""
+    jobs = [p.parent for p in root.glob("*/results.csv") if p.parent.name.split("_")[0].isdigit()]
+    return sorted(jobs, key=lambda p: int(p.name.split("_")[0]))
+
+
+def _job_config(job: Path) -> dict:
+    path = job / ".hydra" / "config.yaml"
+    return yaml.safe_load(path.read_text()) if path.is_file() else {}
+
+
+def table_name(root: Path) -> str:
+    """The table a sweep root holds: its jobs' `report.table` (set by the experiment), else the folder name."""
+    for job in _job_dirs(root):
+        name = (_job_config(job).get("report") or {}).get("table")
+        if name:
+            return str(name)
+    return root.name
+
+
+def spread(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per summary row (bench.report.tables order): `ok/captures` and, per metric, 'median [q25, q75]' in cm over the
+    row's successful captures (the interquartile range says how much the captures disagree)."""
+    from bench.report import tables
+
+    summary = tables.summarise(rows)
+    rows = rows.assign(_ok=tables.succeeded(rows))
+    lines = []
+    for _, line in summary.iterrows():
+        match = np.logical_and.reduce([rows[c].eq(line[c]) for c in tables.GROUP_COLUMNS])
+        good = rows[match & rows._ok]
+        entry = {"": line.row, "ok": f"{line.ok}/{line.captures}"}
+        for metric in tables.METRICS_CM:
+            values = good[metric].dropna()
+            if values.empty:
+                entry[f"{metric[:-3]} median [IQR]"] = "–"
+                continue
+            q25, q50, q75 = values.quantile(QUANTILES)
+            entry[f"{metric[:-3]} median [IQR]"] = f"{q50:.2f} [{q25:.2f}, {q75:.2f}]"
+        lines.append(entry)
+    return pd.DataFrame(lines)
+
+
+def per_object(rows: pd.DataFrame, metric: str = "P_cm") -> pd.DataFrame:
+    """`metric` (cm) per summary row (lines) and capture (columns `object distance`), 'failed: <reason>' where a
+    metric is undefined and '–' where the row was not run on that capture."""
+    from bench.report import tables
+
+    rows = rows.assign(_ok=tables.succeeded(rows), _label=[tables.row_label(m, f) for m, f in
+                                                           zip(rows.method, rows.freq, strict=False)],
+                       _capture=[f"{o} {d} cm" for o, d in zip(rows.object, rows.distance, strict=False)])
+    order = list(dict.fromkeys(tables.summarise(rows.drop(columns=["_ok", "_label", "_capture"])).row))
+    captures = sorted(rows._capture.unique())
+    table = pd.DataFrame({"": order})
+    for capture in captures:
+        cells = []
+        for label in order:
+            found = rows[(rows._label == label) & (rows._capture == capture)]
+            if found.empty:
+                cells.append("–")
+            elif not found._ok.all():
+                reason = str(found.get("failure", pd.Series([""])).fillna("").iloc[0]) or "metric undefined"
+                cells.append(f"failed: {reason}")
+            else:
+                cells.append(f"{found[metric].mean():.2f}")
+        table[capture] = cells
+    return table
+
+
+def _html_table(table: pd.DataFrame) -> str:
+    return table.to_html(index=False, escape=True, border=0, na_rep="–")
+
+
+def _means_table(summary: pd.DataFrame) -> str:
+    """The table as bench.report.tables prints it (ok as k/N, † rows not comparable), best values in bold."""
+    from bench.report import tables
+
+    shown = tables._formatted(summary, lambda text: f"\x00{text}\x01")
+    return _html_table(shown).replace("\x00", "<b>").replace("\x01", "</b>")
+
+
+def _cells_section(root: Path, rows: pd.DataFrame) -> str:
+    """Per job: cell, overrides, code version(s), device, host, timing, and its full configuration (folded)."""
+    parts = ["<table><tr><th>job</th><th>overrides</th><th>code version</th><th>device</th><th>host</th>"
+             "<th>timing</th><th>rows</th></tr>"]
+    configs = []
+    for job in _job_dirs(root):
+        job_rows = pd.read_csv(job / "results.csv")
+        overrides_path = job / ".hydra" / "overrides.yaml"
+        overrides = yaml.safe_load(overrides_path.read_text()) if overrides_path.is_file() else []
+        values = {c: ", ".join(sorted(map(str, job_rows[c].dropna().unique()))) if c in job_rows else "–"
+                  for c in ("code_version", "device", "hostname", "timing")}
+        parts.append("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in (
+            job.name, " ".join(overrides or []), values["code_version"], values["device"], values["hostname"],
+            values["timing"], len(job_rows))) + "</tr>")
+        config_path = job / ".hydra" / "config.yaml"
+        if config_path.is_file():
+            configs.append(f"<details><summary>{html.escape(job.name)}: configuration</summary>"
+                           f"<pre>{html.escape(config_path.read_text())}</pre></details>")
+    parts.append("</table>")
+    return "\n".join(parts + configs)
+
+
+def _realsense_priors(root: Path, stems: list[str]) -> dict[str, np.ndarray]:
+    """The RealSense prior (m, on each capture's metric grid) of the captures, where the sweep's dataset can still
+    be read here; an unreadable capture simply has no prior in its panel."""
+    from bench.maroon import reader as maroon
+    from methods.api import prior_image_m
+    from methods.domain.errors import DatasetError
+
+    jobs = _job_dirs(root)
+    if not jobs:
+        return {}
+    dataset = _job_config(jobs[0]).get("dataset") or {}
+    dataset_root = Path(str(dataset.get("root", "")))
+    priors = {}
+    for stem in stems:
+        object_name, distance, _ = stem.rsplit("_", 2)
+        try:
+            capture = maroon.read_capture(dataset_root / object_name / distance, frame=int(dataset.get("frame", -1)),
+                                          parts=("radar", "realsense"))
+            priors[stem] = np.asarray(prior_image_m(capture, "realsense", capture.radar.grid))
+        except (DatasetError, ValueError, OSError):
+            continue
+    return priors
+
+
+def _pictures_section(root: Path) -> str:
+    """Writes the pictures (bench.report.pictures) under `root/pictures/` and embeds them, one block per capture."""
+    from bench.report import pictures, tables
+
+    runs = []
+    for job in _job_dirs(root):
+        if (job / "arrays.h5").is_file():
+            first = pd.read_csv(job / "results.csv", nrows=1)
+            runs.append((tables.row_label(first.method[0], first.freq[0]), job / "arrays.h5"))
+    if not runs:
+        return "<p>No job wrote arrays.h5: no pictures.</p>"
+    stems = pictures.capture_stems([path for _, path in runs])
+    written = pictures.sweep_pictures(runs, root / "pictures", _realsense_priors(root, stems))
+    blocks = []
+    for stem, files in written.items():
+        ply_dir = html.escape(str(root / "pictures" / "point_clouds" / stem))
+        blocks.append(f"<h4>{html.escape(stem)}</h4><p class='caption'>Point clouds (PLY files in {ply_dir}):</p>"
+                      + _image(files["point_clouds"], f"{stem} point clouds")
+                      + "<p class='caption'>Depth, magnitude and signed error:</p>"
+                      + _image(files["panel"], f"{stem} panel"))
+    return "\n".join(blocks)
+
+
+def root_section(root: Path, pictures: bool) -> tuple[str, str]:
+    """(table name, HTML section) of one sweep root."""
+    from bench.report import merge, plots, tables
+
+    rows = merge.merge(root) if not (root / "results.csv").is_file() else pd.read_csv(root / "results.csv")
+    name = table_name(root)
+    summary = tables.summarise(rows)
+    plot = root / "runtime_vs_error.png"
+    if not plot.is_file():
+        plots.runtime_vs_error(summary, plot, f"{name}: runtime against error")
+    objects = ", ".join(sorted(rows.object.unique()))
+    distances = ", ".join(f"{d} cm" for d in sorted(rows.distance.unique()))
+    parts = [f"<h2 id='{html.escape(name)}'>{html.escape(tables.TITLES.get(name, name))} "
+             f"<small>({html.escape(str(root))})</small></h2>",
+             f"<p class='caption'>{html.escape(tables.caption(name, rows))}</p>",
+             "<h3>Means over captures</h3>", _means_table(summary),
+             f"<h3>Spread across captures</h3><p class='caption'>Median and interquartile range [25 %, 75 %] of "
+             f"each metric (cm) over the row's successful captures ({objects}; {distances}).</p>",
+             _html_table(spread(rows)),
+             "<h3>Per object: P (cm)</h3>", _html_table(per_object(rows)),
+             "<h3>Runtime against error</h3>", _image(plot, f"{name} runtime against error")]
+    if pictures:
+        parts += ["<h3>Pictures per capture</h3>", _pictures_section(root)]
+    parts += ["<h3>Cells: configuration and code version</h3>", _cells_section(root, rows)]
+    return name, "\n".join(parts)
+
+
+def write_report(roots: list[Path], out: Path, pictures: bool | list[Path] = True) -> Path:
+    """The HTML page of the sweep roots at `out` (written atomically); returns `out`. `pictures`: for every root
+    (True), none (False) or the roots listed."""
+    chosen = [Path(p).resolve() for p in pictures] if isinstance(pictures, list) else None
+    sections = [root_section(root, bool(pictures) if chosen is None else root.resolve() in chosen) for root in roots]
+    nav = " ".join(f"<a href='#{html.escape(name)}'>{html.escape(name)}</a>" for name, _ in sections)
+    page = (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>mm2fsk-bench report</title>"
+            f"<style>{_STYLE}</style></head><body><h1>mm2fsk-bench report</h1>"
+            f"<p class='caption'>Written {time.strftime('%Y-%m-%d %H:%M:%S %Z')} from "
+            f"{html.escape(', '.join(map(str, roots)))}.</p><nav>{nav}</nav>"
+            + "\n".join(body for _, body in sections) + f"{_LOADED_CHECK}</body></html>\n")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp")
+    tmp.write_text(page, encoding="utf-8")
+    os.replace(tmp, out)
+    return out
+
+
+def default_output(roots: list[Path]) -> Path:
+    if len(roots) == 1:
+        return roots[0] / "report.html"
+    return Path(os.path.commonpath([r.resolve() for r in roots])) / "report.html"
+
+
+def main() -> int:
+    parser = cli.ArgumentParser(prog="python -m bench.report", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("roots", type=Path, nargs="+", metavar="SWEEP_ROOT",
+                        help="sweep root(s) of `python -m bench -m ...` (holding <job>/results.csv)")
+    parser.add_argument("--out", type=Path, help="the HTML file (default: see above)")
+    parser.add_argument("--no-pictures", action="store_true", help="leave out the per-capture pictures (faster)")
+    args = parser.parse_args()
+    roots = [cli.existing_path(root, "dir", "sweep root") for root in args.roots]
+    for root in roots:
+        if not _job_dirs(root) and not (root / "results.csv").is_file():
+            raise cli.UserError(root, "not a sweep root: no results.csv and no <job>/results.csv")
+    out = cli.output_file(args.out or default_output(roots))
+    print(write_report(roots, out, pictures=not args.no_pictures))
+    return 0
+
+
+if __name__ == "__main__":
+    cli.run_guarded(main)

@@ -1,0 +1,78 @@
+"""After a multirun: merge the jobs' rows into the sweep root and write its table and plots (a Hydra callback).
+
+Sweep root after `python -m bench -m experiment=table3`: `results.csv` (every job's rows), `table3.md`, `.csv`,
+`.tex` (bench.report.tables), `runtime_vs_error.png` and, with `report.depth_errors=true`,
+`depth_errors/<object>_<distance>_<frame>.png` (bench.report.plots; off by default: the figures cost more than the
+rest of the merge).
+`python -m bench.report.merge ROOT [--table NAME]` does the same for a sweep that was interrupted before the end.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+from hydra.experimental.callback import Callback
+from omegaconf import DictConfig
+
+from bench import cli
+from bench.harness.results import write_results
+from bench.report import tables
+
+
+def job_files(root: Path, name: str) -> list[Path]:
+    """`root/<job number>_*/name` in job order."""
+    return sorted(root.glob(f"*/{name}"), key=lambda p: int(p.parent.name.split("_")[0]))
+
+
+def merge(root: Path) -> pd.DataFrame:
+    """Concatenate `root/*/results.csv` (job order) into `root/results.csv` (atomic); returns the rows."""
+    parts = job_files(root, "results.csv")
+    if not parts:
+        raise FileNotFoundError(f"{root}: no job wrote */results.csv")
+    rows = pd.concat([pd.read_csv(p) for p in parts], ignore_index=True)
+    return write_results(root / "results.csv", rows.to_dict("records"))
+
+
+def report(root: Path, table: str | None, depth_errors: bool = False) -> pd.DataFrame:
+    """Merge the rows; with a table name also write the table (md, csv, tex) and the runtime plot, and with
+    depth_errors the per-capture depth-error figures; returns the summary."""
+    from bench.report import (
+        plots,  # matplotlib (~1 s): only at the end of a sweep, not in every run that loads the callback
+    )
+
+    rows = merge(root)
+    summary = tables.summarise(rows)
+    if table is not None:
+        text = tables.caption(table, rows)
+        (root / f"{table}.md").write_text(f"{text}\n\n{tables.summary_markdown(summary)}\n")
+        summary.to_csv(root / f"{table}.csv", index=False, float_format="%.4f")
+        (root / f"{table}.tex").write_text(tables.summary_latex(summary, text))
+        plots.runtime_vs_error(summary, root / "runtime_vs_error.png", f"{table}: runtime against error")
+    if table is not None and depth_errors:
+        runs = [(tables.row_label(*pd.read_csv(p.parent / "results.csv").loc[0, ["method", "freq"]]), p)
+                for p in job_files(root, "arrays.h5")]
+        plots.depth_error_maps(runs, root / "depth_errors")
+    return summary
+
+
+class MergeResults(Callback):
+    """Hydra callback (configs/config.yaml `hydra.callbacks.merge`): `report` at the end of every multirun."""
+
+    def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
+        report(Path(config.hydra.sweep.dir), config.report.table, config.report.get("depth_errors", False))
+
+
+def main() -> int:
+    parser = cli.ArgumentParser(prog="python -m bench.report.merge", description=__doc__)
+    parser.add_argument("root", type=Path, help="sweep root (holding <job>/results.csv)")
+    parser.add_argument("--table", choices=sorted(tables.TITLES))
+    parser.add_argument("--depth-errors", action="store_true",
+                        help="also draw depth_errors/<capture>.png (needs --table)")
+    args = parser.parse_args()
+    root = cli.existing_path(args.root, "dir", "sweep root")
+    print(tables.summary_markdown(report(root, args.table, args.depth_errors)))
+    return 0
+
+
+if __name__ == "__main__":
+    cli.run_guarded(main)

@@ -1,0 +1,106 @@
+"""Figures of a sweep: runtime against error with the Pareto front, and per-capture signed depth-error maps (PNG)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after choosing the file-only backend)
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+
+ERROR_LIMIT_CM = 2.0     # colour scale of the signed error maps: -2 .. +2 cm (larger errors saturate)
+
+
+def pareto_front(runtime_ms: np.ndarray, error_cm: np.ndarray) -> np.ndarray:
+    """Bool mask of the points no other point beats in both runtime and error (ties kept)."""
+    runtime_ms, error_cm = np.asarray(runtime_ms, float), np.asarray(error_cm, float)
+    dominated = ((runtime_ms[None, :] <= runtime_ms[:, None]) & (error_cm[None, :] <= error_cm[:, None])
+                 & ((runtime_ms[None, :] < runtime_ms[:, None]) | (error_cm[None, :] < error_cm[:, None])))
+    return ~dominated.any(axis=1) & np.isfinite(error_cm)
+
+
+def runtime_vs_error(summary: pd.DataFrame, path: Path, title: str) -> Path:
+    """Mean runtime (ms, log) against mean P (cm, log) per summary row (bench.report.tables.summarise), the Pareto front
+    marked and joined. Only rows with a runtime measured alone are drawn; rows that failed on some capture are
+    drawn hollow and take no part in the front (their mean covers fewer captures)."""
+    shown = summary[np.isfinite(summary.runtime_ms) & np.isfinite(summary.P_cm)]
+    fig, ax = plt.subplots(figsize=(8.5, 5.0))
+    for method, group in shown.groupby("method", sort=False):
+        colour = ax.scatter([], [], s=30).get_facecolor()[0]
+        ax.scatter(group.runtime_ms, group.P_cm, label=method, s=30,
+                   facecolors=[colour if ok else "none" for ok in group.comparable], edgecolors=[colour])
+        for _, row in group.iterrows():
+            label = row.row if row.comparable else f"{row.row} (failed {row.captures - row.ok}/{row.captures})"
+            ax.annotate(label, (row.runtime_ms, row.P_cm), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ranked = shown[shown.comparable]
+    front = ranked[pareto_front(ranked.runtime_ms, ranked.P_cm)].sort_values("runtime_ms")
+    ax.step(front.runtime_ms, front.P_cm, where="post", color="k", lw=1, ls="--")
+    ax.scatter(front.runtime_ms, front.P_cm, s=120, facecolors="none", edgecolors="k", label="Pareto front")
+    missing = len(summary) - len(shown)
+    note = f"\n{missing} of {len(summary)} rows have no runtime measured alone and are not drawn" if missing else ""
+    ax.set(xlabel="runtime per frame, measured alone (ms)", ylabel="mean P (cm)", title=f"{title}{note}")
+    if len(shown):
+        ax.set(xscale="log", yscale="log")
+    else:
+        ax.text(0.5, 0.5, "no runtime measured alone\n(run the sweep one job at a time)", ha="center",
+                transform=ax.transAxes)
+    ax.grid(True, which="both", alpha=0.3)
+    if len(shown):
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path) -> list[Path]:
+    """One PNG per capture: the signed depth error (depth - ground truth, cm) of every run side by side.
+
+    Diverging colours (red: the radar put the surface behind the truth, blue: in front; a wrap shows its
+    direction), saturating at +-ERROR_LIMIT_CM; "no depth" in grey, depth where the ground truth has no surface in
+    black (bench.report.pictures). runs: (label, arrays.h5 of the run) pairs; every capture found gets a figure.
+    """
+    from bench.report import pictures
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    error_map = plt.get_cmap("RdBu_r").with_extremes(bad=pictures.NO_DEPTH_COLOUR)
+    overlay_map = ListedColormap([pictures.NO_DEPTH_COLOUR, pictures.NO_TRUTH_COLOUR])
+    paths = []
+    for stem in pictures.capture_stems([h5_path for _, h5_path in runs]):
+        cells = [(label, arrays) for label, h5_path in runs
+                 if (arrays := pictures.read_arrays(h5_path, stem)) is not None]
+        xlim, ylim = pictures.crop_cm([arrays for _, arrays in cells])
+        ncols = min(len(cells), 7)
+        nrows = -(-len(cells) // ncols)
+        aspect = (ylim[1] - ylim[0]) / (xlim[1] - xlim[0])
+        fig, axes = plt.subplots(nrows, ncols, figsize=(2.4 * ncols + 1.6, (2.4 * aspect + 0.7) * nrows + 1.3),
+                                 squeeze=False, layout="constrained")
+        for ax in axes.flat[len(cells):]:
+            ax.set_axis_off()
+        for ax, (label, arrays) in zip(axes.flat, cells, strict=False):
+            image = ax.imshow(pictures.signed_error_cm(arrays), extent=arrays.extent_cm, cmap=error_map,
+                              vmin=-ERROR_LIMIT_CM, vmax=ERROR_LIMIT_CM, interpolation="nearest")
+            ax.imshow(pictures.no_error_categories(arrays), extent=arrays.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
+                      interpolation="nearest")
+            ax.set(xlim=xlim, ylim=ylim, xlabel="x (cm)", ylabel="y (cm)")
+            ax.set_title(label, fontsize=8)
+            ax.tick_params(labelsize=7)
+            ax.xaxis.label.set_fontsize(7)
+            ax.yaxis.label.set_fontsize(7)
+        fig.colorbar(image, ax=axes, shrink=0.9, extend="both",
+                     label=f"depth - ground truth (cm), saturates at ±{ERROR_LIMIT_CM:g}")
+        fig.legend(handles=[Patch(color=pictures.NO_DEPTH_COLOUR, label="no depth"),
+                            Patch(color=pictures.NO_TRUTH_COLOUR, label="depth, no ground truth"),
+                            Patch(color=error_map(1.0), label="behind the surface"),
+                            Patch(color=error_map(0.0), label="in front of it")],
+                   loc="outside lower center", ncols=4, fontsize=7, frameon=False)
+        fig.suptitle(f"{stem}: signed depth error per method (radar space, x and y in cm)", fontsize=9)
+        path = out_dir / f"{stem}.png"
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        paths.append(path)
+    return paths

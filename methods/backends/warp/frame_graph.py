@@ -1,0 +1,312 @@
+"""A whole MM-2FSK new frame as one CUDA graph: the RealSense prior (camera quads, the scanline hole fill), the
+correlation at the prior (tables built from the raw samples, tensor cores), depth and filter, and the copies in
+and out, replayed per frame with one launch and one synchronisation (`FrameGraph.run`).
+
+The launches are those of the step-by-step device path (`warp_backend.prior.realsense_prior` with fill
+'scanline', then `warp_backend.fsk.depth_at_prior`), on buffers allocated once per setting (depth image size,
+grid, camera, transform, frequencies, antennas, filter threshold: `graph_key`) so that their addresses stay
+fixed, and with launch sizes that do not depend on the frame: the covered pixels are compacted into slots as
+before and every later kernel runs over all ny * nx slots, threads (and the correlation's blocks) past the count
+returning at once, so the count never goes to the host before the end. A new frame's samples,
+depth image and mask are copied into pinned staging buffers on the host; the graph's first nodes copy them to the
+device. Warp-CPU has no graphs: there `run` issues the same launches (the correlation with the separable kernel,
+Warp-CPU's default), which is how the tests compare this path with the step-by-step one without a GPU.
+"""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from methods.backends.warp import correlation_kernels as ck
+from methods.backends.warp import fsk_kernels, prior_kernels, table_kernels
+from methods.backends.warp.frames import C_M_PER_S, FrameInputs, antennas4
+from methods.backends.warp.fsk import grid_arrays
+from methods.backends.warp.prior import pixel_scale
+
+GRAPHS_KEPT = 4
+PEAK_SHARDS = 256          # partial maxima of the magnitude (fsk_kernels.reduce_peak)
+_GRAPHS: dict = {}
+
+
+def graph_key(depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio, device) -> tuple:
+    """Everything a FrameGraph bakes in (sizes, constants, scalar launch arguments)."""
+    k = depth.intrinsics
+    return (str(device), depth.depth_mm.shape, depth.mask is not None, (k.fx, k.fy, k.cx, k.cy),
+            float(depth.depth_scale_m), np.asarray(realsense2radar, dtype=np.float64).tobytes(), grid,
+            max_jump_mm, np.asarray(freqs_hz, dtype=np.float64).tobytes(), tx_m.tobytes(), rx_m.tobytes(),
+            float(keep_ratio))
+
+
+class GraphCorrelator:
+    """One frequency set's correlation over a fixed number of device points, on fixed buffers: `load(signal)`
+    stages a frame's samples (host), `enqueue_tables()` copies them in and builds the tensor-core tables, and
+    `enqueue(points)` launches the correlation into `out` (F, n). Warp-CPU: the separable kernel from host tables."""
+
+    def __init__(self, dev, n_points: int, freqs_hz, tx_m, rx_m):
+        n_rx, n_tx, n_f = len(rx_m), len(tx_m), len(freqs_hz)
+        self.device, self.freqs_hz, self.tx_m, self.rx_m = dev, freqs_hz, tx_m, rx_m
+        self.raw_host = wp.empty((n_rx, n_tx, n_f), dtype=wp.vec2f, device="cpu", pinned=not dev.is_cpu)
+        self.raw = wp.empty_like(self.raw_host, device=dev)
+        self.gain_raw = wp.empty(n_f, dtype=wp.float32, device=dev)
+        self.gain = wp.empty(n_f, dtype=wp.float32, device=dev)
+        self.mat_h = wp.empty((n_f, 2, int(ck.TC_ANT), int(ck.TC2_KP)), dtype=wp.float16, device=dev)
+        self.pts = wp.empty(n_points, dtype=wp.vec4f, device=dev)
+        self.common = wp.empty((n_f, n_points), dtype=wp.vec2f, device=dev)
+        self.out = wp.empty((n_f, n_points), dtype=wp.vec2f, device=dev)
+        self.k = wp.array((2 * np.pi * freqs_hz / C_M_PER_S).astype(np.float32), dtype=wp.float32, device=dev)
+        self.cycles = wp.array(2.0 * freqs_hz / C_M_PER_S, dtype=wp.float64, device=dev)
+        self.rx4 = wp.array(antennas4(rx_m, int(ck.TC_ANT)), dtype=wp.vec4f, device=dev)
+        self.tx4 = wp.array(antennas4(tx_m, int(ck.TC_ANT)), dtype=wp.vec4f, device=dev)
+        self.scale = wp.float32(1.0 / (n_rx * n_tx))
+        self.every = wp.array([2**31 - 1], dtype=wp.int32, device=dev)
+
+    def load(self, signal: np.ndarray) -> None:
+        """Stage a frame's samples (n_rx, n_tx, F) for the next run."""
+        np.copyto(self.raw_host.numpy().view(np.complex64)[..., 0], signal, casting="same_kind")
+
+    def enqueue_tables(self) -> None:
+        dev = self.device
+        wp.copy(self.raw, self.raw_host)
+        if dev.is_cpu:
+            return
+        self.gain_raw.zero_()
+        wp.launch(table_kernels.signal_gain, dim=self.raw.shape, inputs=[self.raw, self.scale, self.gain_raw],
+                  device=dev)
+        wp.launch(table_kernels.tx_half_table, dim=self.mat_h.shape,
+                  inputs=[self.raw, self.scale, self.gain_raw, self.gain, self.mat_h], device=dev)
+
+    def enqueue(self, points: wp.array, count: wp.array | None = None) -> wp.array:
+        """Phasors (F, n) of the n points into `out`; with `count` (device int32) only of the first count[0]
+        (the tensor-core blocks past it return at once; Warp-CPU computes them all)."""
+        dev, n = self.device, points.shape[0]
+        empty = wp.empty(0, dtype=wp.float64, device=dev)
+        if dev.is_cpu:
+            inputs = FrameInputs(self.raw_host.numpy().view(np.complex64)[..., 0], self.freqs_hz, self.tx_m,
+                                 self.rx_m, dev.alias)
+            wp.launch(ck.correlate_separable, dim=n,
+                      inputs=[0, points, empty, empty, empty, inputs.rx, inputs.tx_padded, inputs.k, inputs.cycles,
+                              inputs.signal_padded, 0, self.out], device=dev)
+            return self.out
+        wp.launch(ck.prepare_points, dim=n, inputs=[0, points, empty, empty, empty, self.cycles, self.pts,
+                                                    self.common], device=dev)
+        n_blocks = (n + int(ck.TC2_POINTS) - 1) // int(ck.TC2_POINTS)
+        wp.launch_tiled(ck.correlate_tiles_tx_halves, dim=[n_blocks],
+                        inputs=[self.pts, self.rx4, self.tx4, self.k, self.gain, self.mat_h, self.common, 0, self.out,
+                                self.every if count is None else count], block_dim=ck.TC_BLOCK, device=dev)
+        return self.out
+
+
+class CapturedLaunches:
+    """A fixed sequence of copies and launches on fixed buffers (`_enqueue`, defined by the subclass), captured once
+    as a CUDA graph and replayed per frame; Warp-CPU has no graphs, so there it is issued anew each time."""
+
+    device: wp.Device
+    graph = None
+
+    def _enqueue(self) -> None:
+        raise NotImplementedError
+
+    def _capture(self) -> None:
+        if not self.device.is_cpu:
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._enqueue()
+            self.graph = capture.graph
+
+    def _replay(self) -> None:
+        """Run the sequence once and wait for the device."""
+        if self.graph is not None:
+            wp.capture_launch(self.graph)
+        else:
+            self._enqueue()
+        wp.synchronize_device(self.device)
+
+
+class FrameGraph(CapturedLaunches):
+    """The buffers and launches of one setting (module doc); `run(depth, signal)` computes a frame."""
+
+    def __init__(self, buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio):
+        dev = wp.get_device(buffers.wp_device)
+        self.device, self.grid = dev, grid
+        ny, nx = self.shape = grid.image_shape
+        n_px = ny * nx
+        height, width = depth.depth_mm.shape
+        pinned = not dev.is_cpu
+        self.depth_host = wp.empty((height, width), dtype=wp.uint16, device="cpu", pinned=pinned)
+        self.mask_host = wp.empty((height, width) if depth.mask is not None else (1, 1), dtype=wp.uint8,
+                                  device="cpu", pinned=pinned)
+        self.maps_host = wp.empty((3, n_px), dtype=wp.float64, device="cpu", pinned=pinned)
+        self.stats_host = wp.empty(2, dtype=wp.int32, device="cpu", pinned=pinned)
+        self.slot_host = wp.empty(1, dtype=wp.int32, device="cpu", pinned=pinned)
+        self.roi_host = wp.empty(n_px, dtype=wp.uint8, device="cpu", pinned=pinned)
+        self.roi = wp.empty(n_px, dtype=wp.uint8, device=dev)
+        self.d_img = wp.empty_like(self.depth_host, device=dev)
+        self.m_img = wp.empty_like(self.mask_host, device=dev)
+        self.zbuf = wp.empty(n_px, dtype=wp.float64, device=dev)
+        self.filled = wp.empty(n_px, dtype=wp.float64, device=dev)
+        self.stats = wp.empty(2 + 4 * ny + 2 * nx, dtype=wp.int32, device=dev)
+        self.slot = wp.empty(1, dtype=wp.int32, device=dev)
+        self.peak = wp.empty(1, dtype=wp.float32, device=dev)
+        self.shards = wp.empty(PEAK_SHARDS, dtype=wp.float32, device=dev)
+        self.points = wp.zeros(n_px, dtype=wp.vec3d, device=dev)          # unused slots: finite points
+        self.pixel = wp.zeros(n_px, dtype=wp.int32, device=dev)
+        self.maps = wp.empty((3, n_px), dtype=wp.float64, device=dev)
+        self.correlator = GraphCorrelator(dev, n_px, freqs_hz, tx_m, rx_m)
+        k = depth.intrinsics
+        self.cam = prior_kernels.vec9d(k.fx, k.fy, k.cx, k.cy, depth.depth_scale_m * 1000.0, *pixel_scale(grid))
+        self.xf = wp.mat44d(*np.asarray(realsense2radar, dtype=np.float64).ravel())
+        self.max_jump = wp.float64(-1.0 if max_jump_mm is None else max_jump_mm)
+        self.use_mask = int(depth.mask is not None)
+        self.x_m, self.y_m = grid_arrays(buffers, grid)
+        self.m_per_rad = float(C_M_PER_S / (4.0 * np.pi * (freqs_hz[1] - freqs_hz[0])))
+        self.keep_ratio = float(keep_ratio)
+        self._capture()
+
+    def _enqueue(self) -> None:
+        """Every copy and launch of a frame, in stream order (captured once on CUDA; issued per frame on Warp-CPU)."""
+        dev = self.device
+        ny, nx = self.shape
+        n_px = ny * nx
+        height, width = self.d_img.shape
+        wp.copy(self.d_img, self.depth_host)
+        wp.copy(self.m_img, self.mask_host)
+        wp.copy(self.roi, self.roi_host)
+        self.correlator.enqueue_tables()
+        self.slot.zero_()
+        self.shards.zero_()
+        wp.launch(prior_kernels.clear_zbuffer, dim=n_px, inputs=[ny, self.zbuf, self.stats], device=dev)
+        wp.launch(prior_kernels.raster_camera_quads, dim=(height - 1) * (width - 1),
+                  inputs=[self.d_img, self.m_img, self.use_mask, self.cam, self.xf, self.max_jump, ny, nx,
+                          self.zbuf], device=dev)
+        wp.launch(prior_kernels.covered_spans, dim=n_px, inputs=[ny, nx, self.zbuf, self.stats], device=dev)
+        wp.launch(prior_kernels.scanline_fill, dim=n_px, inputs=[ny, nx, self.zbuf, self.stats, self.filled],
+                  device=dev)
+        wp.launch(fsk_kernels.compact_covered_pixels, dim=n_px,
+                  inputs=[nx, self.filled, self.x_m, self.y_m, self.slot, self.points, self.pixel, self.maps, 1,
+                          self.roi], device=dev)
+        ph = self.correlator.enqueue(self.points, self.slot)
+        wp.launch(fsk_kernels.depth_at_prior_counted, dim=n_px,
+                  inputs=[ph, self.pixel, self.slot, self.m_per_rad, self.maps, self.shards], device=dev)
+        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
+        wp.launch(fsk_kernels.magnitude_filter_counted, dim=n_px,
+                  inputs=[self.pixel, self.slot, self.keep_ratio, self.peak, self.maps], device=dev)
+        wp.copy(self.maps_host, self.maps)
+        wp.copy(self.stats_host, self.stats, count=2)
+        wp.copy(self.slot_host, self.slot)
+
+    def run(self, depth, signal: np.ndarray, roi_pixels: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+        """(depth_m, magnitude, prior_m) (ny, nx) NaN where none, the prior's covered pixels and those correlated
+        (inside `roi_pixels` (ny, nx) bool, None = all) of a new frame: its depth frame (the setting's size) and
+        two-frequency samples (n_rx, n_tx, 2)."""
+        np.copyto(self.roi_host.numpy(), 1 if roi_pixels is None else roi_pixels.ravel(), casting="unsafe")
+        np.copyto(self.depth_host.numpy(), depth.depth_mm, casting="unsafe")
+        if self.use_mask:
+            np.copyto(self.mask_host.numpy(), depth.mask, casting="unsafe")
+        self.correlator.load(signal)
+        self._replay()
+        maps = self.maps_host.numpy().reshape(3, *self.shape).copy()
+        n_covered, n_filled = (int(v) for v in self.stats_host.numpy())
+        return maps[0], maps[1], maps[2], n_covered + n_filled, int(self.slot_host.numpy()[0])
+
+
+def frame_graph(buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio) -> FrameGraph:
+    """The FrameGraph of this setting, built (and on CUDA captured) on first use."""
+    key = graph_key(depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio, buffers.wp_device)
+    if key not in _GRAPHS:
+        _GRAPHS[key] = FrameGraph(buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m,
+                                  keep_ratio)
+        while len(_GRAPHS) > GRAPHS_KEPT:
+            _GRAPHS.pop(next(iter(_GRAPHS)))
+    return _GRAPHS[key]
+
+
+class FskGraph(CapturedLaunches):
+    """2FSK or 3FSK over a fixed pixel list as one CUDA graph (`warp_backend.fsk.two_pass` / `three_fsk`'s launches
+    on fixed buffers): the pair's (2FSK: both frequencies; 3FSK: the coarse pair) pass 1 at the scalar prior,
+    the strongest pixel, the refocused pass 2, then 2FSK's pair depth or 3FSK's coarse step, third correlation and
+    slope, and the filter; `run(signal)` -> (maps (2 or 3, ny, nx), (z1_m, reference pixel))."""
+
+    def __init__(self, buffers, grid, flat_pixels: np.ndarray, freqs_hz, pair: list[int], three: bool, tx_m, rx_m,
+                 prior_m: float, keep_ratio: float, first_only: bool):
+        dev = wp.get_device(buffers.wp_device)
+        self.device, self.shape, self.pair, self.three = dev, grid.image_shape, pair, three
+        ny, nx = grid.image_shape
+        n = len(flat_pixels)
+        pinned = not dev.is_cpu
+        rows = 3 if three else 2
+        self.pixel = wp.array(flat_pixels.astype(np.int32), dtype=wp.int32, device=dev)
+        self.points = wp.zeros(n, dtype=wp.vec3d, device=dev)
+        self.maps = wp.empty((rows, ny * nx), dtype=wp.float64, device=dev)
+        self.maps_host = wp.empty((rows, ny * nx), dtype=wp.float64, device="cpu", pinned=pinned)
+        self.scalars = wp.empty(2, dtype=wp.float64, device=dev)
+        self.scalars_host = wp.empty(2, dtype=wp.float64, device="cpu", pinned=pinned)
+        self.first_peak = wp.empty(1, dtype=wp.float32, device=dev)
+        self.peak = wp.empty(1, dtype=wp.float32, device=dev)
+        self.first_shards = wp.empty(PEAK_SHARDS, dtype=wp.float32, device=dev)
+        self.shards = wp.empty(PEAK_SHARDS, dtype=wp.float32, device=dev)
+        self.ref = wp.empty(1, dtype=wp.int32, device=dev)
+        self.x_m, self.y_m = grid_arrays(buffers, grid)
+        self.pair_correlator = GraphCorrelator(dev, n, freqs_hz[pair], tx_m, rx_m)
+        self.all_correlator = GraphCorrelator(dev, n, freqs_hz, tx_m, rx_m) if three else None
+        self.m_per_rad = float(C_M_PER_S / (4.0 * np.pi * (freqs_hz[pair[1]] - freqs_hz[pair[0]])))
+        offsets_hz = np.asarray(freqs_hz, dtype=np.float64) - freqs_hz[-1]
+        centred_hz = offsets_hz - offsets_hz.mean()
+        self.centred = wp.vec3d(*(centred_hz / (centred_hz @ centred_hz))) if three else None
+        self.prior_m, self.keep_ratio, self.first_only = float(prior_m), float(keep_ratio), int(first_only)
+        self._capture()
+
+    def _enqueue(self) -> None:
+        dev, n, nx = self.device, self.points.shape[0], self.shape[1]
+        self.maps.fill_(float("nan"))
+        self.first_shards.zero_()
+        self.shards.zero_()
+        self.ref.fill_(2147483647)
+        self.pair_correlator.enqueue_tables()
+        if self.three:
+            self.all_correlator.enqueue_tables()
+        wp.launch(fsk_kernels.points_at_depth, dim=n, inputs=[self.pixel, nx, self.x_m, self.y_m, self.prior_m,
+                                                              self.points], device=dev)
+        ph = self.pair_correlator.enqueue(self.points)
+        wp.launch(fsk_kernels.first_magnitude_peak, dim=n, inputs=[ph, self.first_shards], device=dev)
+        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.first_shards, self.first_peak], device=dev)
+        wp.launch(fsk_kernels.first_argmax, dim=n, inputs=[ph, self.first_peak, self.ref], device=dev)
+        wp.launch(fsk_kernels.refocus_points, dim=n, inputs=[ph, self.ref, self.prior_m, self.m_per_rad, self.points,
+                                                             self.scalars], device=dev)
+        ph = self.pair_correlator.enqueue(self.points)
+        if self.three:
+            wp.launch(fsk_kernels.coarse_points, dim=n, inputs=[ph, self.pixel, self.m_per_rad, self.points,
+                                                                self.maps], device=dev)
+            ph = self.all_correlator.enqueue(self.points)
+            wp.launch(fsk_kernels.slope_depth, dim=n,
+                      inputs=[ph, self.pixel, self.centred, float(C_M_PER_S / (4.0 * np.pi)), self.points, self.maps,
+                              self.shards], device=dev)
+        else:
+            wp.launch(fsk_kernels.pair_depth, dim=n, inputs=[ph, self.pixel, self.m_per_rad, self.first_only,
+                                                             self.points, self.maps, self.shards], device=dev)
+        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
+        wp.launch(fsk_kernels.magnitude_filter, dim=n, inputs=[self.pixel, self.keep_ratio, self.peak, self.maps],
+                  device=dev)
+        wp.copy(self.maps_host, self.maps)
+        wp.copy(self.scalars_host, self.scalars)
+
+    def run(self, signal: np.ndarray) -> tuple[np.ndarray, tuple[float, int]]:
+        """Maps (rows, ny, nx) (depth, magnitude[, coarse depth]) and (z1_m, reference pixel) of a frame."""
+        self.pair_correlator.load(signal if self.pair == list(range(signal.shape[2])) else signal[:, :, self.pair])
+        if self.three:
+            self.all_correlator.load(signal)
+        self._replay()
+        z1_m, ref = self.scalars_host.numpy()
+        return self.maps_host.numpy().reshape(-1, *self.shape).copy(), (float(z1_m), int(ref))
+
+
+def fsk_graph(buffers, grid, pixels: np.ndarray, freqs_hz, pair: list[int], three: bool, tx_m, rx_m, prior_m: float,
+              keep_ratio: float, first_only: bool = False) -> FskGraph:
+    """The FskGraph of this setting (pixels (ny, nx) bool, row-major order), built and captured on first use."""
+    key = ("fsk", str(buffers.wp_device), grid, np.packbits(pixels).tobytes(), np.asarray(freqs_hz).tobytes(),
+           tuple(pair), three, tx_m.tobytes(), rx_m.tobytes(), float(prior_m), float(keep_ratio), bool(first_only))
+    if key not in _GRAPHS:
+        _GRAPHS[key] = FskGraph(buffers, grid, np.flatnonzero(pixels), np.asarray(freqs_hz, dtype=np.float64),
+                                list(pair), three, tx_m, rx_m, prior_m, keep_ratio, first_only)
+        while len(_GRAPHS) > GRAPHS_KEPT:
+            _GRAPHS.pop(next(iter(_GRAPHS)))
+    return _GRAPHS[key]

@@ -1,0 +1,204 @@
+"""Warp kernels of the FSK depths on the device (kernels only, launched by `methods.backends.warp.fsk`): for MM-2FSK
+the compaction of the covered pixels, depth and magnitude at the prior, the magnitude filter; for 2FSK and 3FSK
+the points of each pass, pass 1's strongest pixel (a reduction), the refocused guess, the pair and slope depths.
+Each reproduces the numpy expression it names (methods.fsk, methods.fsk3) in the same precision (complex64
+phasors, float32 phases, float64 depths)."""
+from __future__ import annotations
+
+import warp as wp
+
+from methods.backends.warp.prior_kernels import FAR
+
+
+@wp.kernel(enable_backward=False)
+def compact_covered_pixels(n_cols: int, zbuf: wp.array(dtype=wp.float64), x_m: wp.array(dtype=wp.float64),
+                           y_m: wp.array(dtype=wp.float64), slot: wp.array(dtype=wp.int32),
+                           points: wp.array(dtype=wp.vec3d), pixel: wp.array(dtype=wp.int32),
+                           maps: wp.array2d(dtype=wp.float64), use_roi: int, roi: wp.array(dtype=wp.uint8)):
+    """maps = (depth NaN, magnitude NaN, prior or NaN); covered pixels (inside the ROI `roi` with use_roi) -> next
+    slot of (x, y, prior) points."""
+    p = wp.tid()
+    z = zbuf[p]
+    nan = wp.float64(wp.nan)
+    maps[0, p] = nan
+    maps[1, p] = nan
+    if z < FAR:
+        maps[2, p] = z
+        if use_roi != 0 and roi[p] == wp.uint8(0):
+            return
+        i = wp.atomic_add(slot, 0, 1)
+        points[i] = wp.vec3d(x_m[p % n_cols], y_m[p // n_cols], z)
+        pixel[i] = p
+    else:
+        maps[2, p] = nan
+
+
+@wp.kernel(enable_backward=False)
+def fsk_depth_at_prior(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
+                       maps: wp.array2d(dtype=wp.float64), peak: wp.array(dtype=wp.float32)):
+    """depth = prior - c angle(c2 conj c1) / (4 pi (f2 - f1)); magnitude = |(c1 + c2) / 2| (float32 as numpy)."""
+    i = wp.tid()
+    p = pixel[i]
+    c1 = ph[0, i]
+    c2 = ph[1, i]
+    re = c2[0] * c1[0] + c2[1] * c1[1]
+    im = c2[1] * c1[0] - c2[0] * c1[1]
+    maps[0, p] = maps[2, p] - m_per_rad * wp.float64(wp.atan2(im, re))
+    mean = (c1 + c2) * wp.float32(0.5)
+    mag = wp.length(mean)
+    maps[1, p] = wp.float64(mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
+
+
+@wp.kernel(enable_backward=False)
+def magnitude_filter(pixel: wp.array(dtype=wp.int32), keep_ratio: wp.float64, peak: wp.array(dtype=wp.float32),
+                     maps: wp.array2d(dtype=wp.float64)):
+    """`filtering.keep_mask`: depth NaN where magnitude is 0 or < max * keep_ratio (10^(-threshold_db / 20), 0 for
+    no threshold)."""
+    p = pixel[wp.tid()]
+    mag = maps[1, p]
+    if mag <= wp.float64(0.0) or mag < wp.float64(peak[0]) * keep_ratio:
+        maps[0, p] = wp.float64(wp.nan)
+
+
+# 2FSK and 3FSK with a scalar prior on the device (`methods.backends.warp.fsk.two_pass` / `three_fsk`): the points
+# of a pass are made here, pass 1's strongest pixel is found by a reduction, and the depth and filter stay here.
+
+@wp.func
+def pair_correction_m(c1: wp.vec2f, c2: wp.vec2f, m_per_rad: wp.float64):
+    """`fsk.depth_correction_m`: m_per_rad * angle(c2 conj c1) (float32 phase, as numpy's complex64)."""
+    re = c2[0] * c1[0] + c2[1] * c1[1]
+    im = c2[1] * c1[0] - c2[0] * c1[1]
+    return m_per_rad * wp.float64(wp.atan2(im, re))
+
+
+@wp.kernel(enable_backward=False)
+def points_at_depth(pixel: wp.array(dtype=wp.int32), n_cols: int, x_m: wp.array(dtype=wp.float64),
+                    y_m: wp.array(dtype=wp.float64), z_m: wp.float64, points: wp.array(dtype=wp.vec3d)):
+    """Point i = (x, y) of pixel[i] at the depth z_m."""
+    i = wp.tid()
+    p = pixel[i]
+    points[i] = wp.vec3d(x_m[p % n_cols], y_m[p // n_cols], z_m)
+
+
+@wp.kernel(enable_backward=False)
+def first_magnitude_peak(ph: wp.array2d(dtype=wp.vec2f), peak: wp.array(dtype=wp.float32)):
+    """peak[0] = max_i |ph[0, i]| (zeroed before)."""
+    i = wp.tid()
+    wp.atomic_max(peak, i % peak.shape[0], wp.length(ph[0, i]))
+
+
+@wp.kernel(enable_backward=False)
+def first_argmax(ph: wp.array2d(dtype=wp.vec2f), peak: wp.array(dtype=wp.float32), ref: wp.array(dtype=wp.int32)):
+    """ref[0] = the first i with |ph[0, i]| == peak (np.argmax's tie rule; ref set to a large value before)."""
+    i = wp.tid()
+    if wp.length(ph[0, i]) == peak[0]:
+        wp.atomic_min(ref, 0, i)
+
+
+@wp.kernel(enable_backward=False)
+def refocus_points(ph: wp.array2d(dtype=wp.vec2f), ref: wp.array(dtype=wp.int32), z0_m: wp.float64,
+                   m_per_rad: wp.float64, points: wp.array(dtype=wp.vec3d), scalars: wp.array(dtype=wp.float64)):
+    """2FSK's common guess z1 = z0 - correction of pass 1's strongest pixel: every point moves to z1 (each thread
+    computes the same z1); scalars = (z1, reference pixel)."""
+    i = wp.tid()
+    r = ref[0]
+    z1 = z0_m - pair_correction_m(ph[0, r], ph[1, r], m_per_rad)
+    q = points[i]
+    points[i] = wp.vec3d(q[0], q[1], z1)
+    if i == 0:
+        scalars[0] = z1
+        scalars[1] = wp.float64(r)
+
+
+@wp.kernel(enable_backward=False)
+def pair_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
+               first_only: int, points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
+               peak: wp.array(dtype=wp.float32)):
+    """2FSK pass 2: depth = guess - correction, magnitude |(c1 + c2) / 2| (or |c1| with first_only: the faithful
+    filter); peak = their maximum (zeroed before)."""
+    i = wp.tid()
+    p = pixel[i]
+    c1 = ph[0, i]
+    c2 = ph[1, i]
+    maps[0, p] = points[i][2] - pair_correction_m(c1, c2, m_per_rad)
+    mag = wp.length((c1 + c2) * wp.float32(0.5))
+    if first_only != 0:
+        mag = wp.length(c1)
+    maps[1, p] = wp.float64(mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
+
+
+@wp.kernel(enable_backward=False)
+def coarse_points(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
+                  points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64)):
+    """3FSK's coarse step: each point moves to its coarse depth guess - correction (maps[2] = coarse depth)."""
+    i = wp.tid()
+    q = points[i]
+    coarse = q[2] - pair_correction_m(ph[0, i], ph[1, i], m_per_rad)
+    points[i] = wp.vec3d(q[0], q[1], coarse)
+    maps[2, pixel[i]] = coarse
+
+
+@wp.kernel(enable_backward=False)
+def slope_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), centred_hz: wp.vec3d,
+                m_per_rad_hz: wp.float64, points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
+                peak: wp.array(dtype=wp.float32)):
+    """`fsk3.slope_correction_m` of three phasors relative to the last: depth = coarse - c s / (4 pi), s the
+    least-squares phase slope (centred_hz = f - mean f over centred_hz . centred_hz, m_per_rad_hz = c / (4 pi));
+    magnitude |(c1 + c2 + c3) / 3|; peak = its maximum (zeroed before)."""
+    i = wp.tid()
+    p = pixel[i]
+    c3 = ph[2, i]
+    r0 = pair_correction_m(c3, ph[0, i], wp.float64(1.0))        # angle(c_k conj c3)
+    r1 = pair_correction_m(c3, ph[1, i], wp.float64(1.0))
+    r2 = pair_correction_m(c3, c3, wp.float64(1.0))
+    mean = (r0 + r1 + r2) / wp.float64(3.0)
+    slope = centred_hz[0] * (r0 - mean) + centred_hz[1] * (r1 - mean) + centred_hz[2] * (r2 - mean)
+    maps[0, p] = points[i][2] - m_per_rad_hz * slope
+    mag = wp.length((ph[0, i] + ph[1, i] + c3) / wp.float32(3.0))
+    maps[1, p] = wp.float64(mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
+
+
+@wp.kernel(enable_backward=False)
+def depth_at_prior_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
+                           count: wp.array(dtype=wp.int32), m_per_rad: wp.float64, maps: wp.array2d(dtype=wp.float64),
+                           peak: wp.array(dtype=wp.float32)):
+    """`fsk_depth_at_prior` over a launch of fixed size (a CUDA graph): threads from count[0] on do nothing."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    p = pixel[i]
+    c1 = ph[0, i]
+    c2 = ph[1, i]
+    re = c2[0] * c1[0] + c2[1] * c1[1]
+    im = c2[1] * c1[0] - c2[0] * c1[1]
+    maps[0, p] = maps[2, p] - m_per_rad * wp.float64(wp.atan2(im, re))
+    mag = wp.length((c1 + c2) * wp.float32(0.5))
+    maps[1, p] = wp.float64(mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
+
+
+@wp.kernel(enable_backward=False)
+def magnitude_filter_counted(pixel: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
+                             keep_ratio: wp.float64, peak: wp.array(dtype=wp.float32),
+                             maps: wp.array2d(dtype=wp.float64)):
+    """`magnitude_filter` over a launch of fixed size: threads from count[0] on do nothing."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    p = pixel[i]
+    mag = maps[1, p]
+    if mag <= wp.float64(0.0) or mag < wp.float64(peak[0]) * keep_ratio:
+        maps[0, p] = wp.float64(wp.nan)
+
+
+@wp.kernel(enable_backward=False)
+def reduce_peak(shards: wp.array(dtype=wp.float32), peak: wp.array(dtype=wp.float32)):
+    """peak[0] = max of the shards: the kernels above take the maximum into shards[i % n_shards] (a float atomic
+    max is a compare-and-swap loop; 90 k threads on one address cost ~0.1 ms on the H100), one thread combines."""
+    m = wp.float32(0.0)
+    for s in range(shards.shape[0]):
+        m = wp.max(m, shards[s])
+    peak[0] = m

@@ -1,0 +1,60 @@
+"""Warp kernels that build a new frame's tensor-core operand on the device (launched by
+`methods.backends.warp.frames`), reproducing the host tables of `FrameInputs` from the raw frame (R, T, F) vec2f:
+
+* `signal_gain`: per frequency the largest |Re| or |Im| of the scaled samples (atomic max; the exact float32
+  values the host's complex64 product gives, so the maximum is the host's);
+* `tx_half_table`: the fp16 operand M_h^T of `correlate_tiles_tx_halves`, (F, 2, 96, TC2_KP): per Tx half h row j
+  and column i the entry of M = [[Sr, Si], [-Si, Sr]] / gain (M's row i, column h * 48 + j of the [Re] half or
+  96 + h * 48 + j - 48 of the [Im] half), the TC2_PAD columns zero; S padded with zeros to 96 x 96. Each entry is
+  the host's float64 quotient rounded to fp16 (through float32 where Warp converts: a tie may round apart, 1 fp16
+  ulp; tests/methods/backends/test_gpu_tables.py). The thread of entry (f, 0, 0, 0) writes the gain the kernel used (1
+  where a
+  frequency's samples are all zero).
+"""
+from __future__ import annotations
+
+import warp as wp
+
+from methods.backends.warp.correlation_kernels import TC2_HALF, TC_ANT, TC_K
+
+
+@wp.kernel(enable_backward=False)
+def signal_gain(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_raw: wp.array(dtype=wp.float32)):
+    """gain_raw[f] = max over (r, t) of max(|Re|, |Im|) of signal[r, t, f] * scale (gain_raw zeroed before)."""
+    r, t, f = wp.tid()
+    s = signal[r, t, f] * scale
+    wp.atomic_max(gain_raw, f, wp.max(wp.abs(s[0]), wp.abs(s[1])))
+
+
+@wp.kernel(enable_backward=False)
+def tx_half_table(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_raw: wp.array(dtype=wp.float32),
+                  gain: wp.array(dtype=wp.float32), mat_h: wp.array4d(dtype=wp.float16)):
+    """One fp16 entry (f, h, j, i) of M_h^T (module doc)."""
+    f, h, j, i = wp.tid()
+    g = wp.float64(gain_raw[f])
+    if g <= wp.float64(0.0):
+        g = wp.float64(1.0)
+    if h == 0 and j == 0 and i == 0:
+        gain[f] = wp.float32(g)
+    if i >= TC_K:
+        mat_h[f, h, j, i] = wp.float16(0.0)
+        return
+    col = h * TC2_HALF + j
+    if j >= TC2_HALF:
+        col = TC_ANT + h * TC2_HALF + j - TC2_HALF
+    ri = i % TC_ANT
+    ci = col % TC_ANT
+    v = wp.float64(0.0)
+    if ri < signal.shape[0] and ci < signal.shape[1]:
+        s = signal[ri, ci, f] * scale
+        re = wp.float64(s[0])
+        im = wp.float64(s[1])
+        if i < TC_ANT:
+            v = re
+            if col >= TC_ANT:
+                v = im
+        else:
+            v = -im
+            if col >= TC_ANT:
+                v = re
+    mat_h[f, h, j, i] = wp.float16(wp.float32(v / g))

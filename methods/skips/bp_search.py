@@ -1,0 +1,291 @@
+"""BP without the empty volume: a coarse-to-fine search of each pixel's depth peak, a filter-aware pixel skip, and
+the coarse pass that bounds the object (methods.skips.roi) - all on arbitrary point sets through one `evaluate` function
+(frequency-summed correlation at points: BLAS per frequency, or the CPU range-compressed gather).
+
+Search (per pixel, on the fine depth samples z_k of the grid inside the ROI):
+1. coarse samples every `step` fine samples (and the last one);
+2. candidates: coarse samples within a window (dB) of the pixel's coarse maximum;
+3. refine by halving: around each candidate c of a level of spacing s evaluate c +- ceil(s / 2); the next level's
+   candidates are the evaluated samples within its (smaller) window of the pixel's maximum so far; down to 1;
+4. climb: while a pixel's argmax has an unevaluated neighbour, evaluate it (the parabola needs both neighbours,
+   and a peak that moved to a window's edge keeps climbing);
+5. depth and max projection by `methods.ops.depth_peak.peak_depth_m` on the evaluated samples (unevaluated ones never
+win).
+
+When it finds the full grid's peak. Let loss(d) bound how far |V(z)| falls (in dB) at distance d from any of its
+peaks. The coarse sample nearest the continuous peak z* lies within step/2 of it, so it is at most
+loss(step dz / 2) below |V(z*)|, which is >= every coarse sample: it is a candidate whenever
+candidate_db >= loss(step dz / 2). The fine grid's maximum sits within dz / 2 of the continuous peak of its own
+lobe, so that lobe's nearest coarse sample is a candidate too once the window >= loss(step dz / 2) + loss(dz / 2).
+Each halving keeps the peak within half a spacing of a candidate (c, c +- ceil(s / 2) cover c +- s / 2), so with
+every level's window >= loss(half its spacing) + loss(dz / 2) the search returns the full grid's argmax (tests:
+exact on random sums of Gaussians, where loss is known, and a constructed miss when the window is too small).
+For radar profiles loss is the fall of the point-spread function along z: the frequencies set it (two
+frequencies: the beat of period c / (2 (f2 - f1)); many: the range resolution c / (2 B)) and so does the
+aperture (its depth of focus, shortest at the nearest depth; off the array axis a depth step also leaves the
+laterally narrow focus, which is tilted along the line of sight, so the fall is faster there). `plan_search`
+measures it on point targets at 0-22 cm from the axis at the ROI's nearest depth and gives each pixel the largest
+step with loss(step dz / 2) <= psf_max_loss_db at its distance from the axis, and candidate_db = that loss +
+candidate_margin_db (>= loss(dz / 2), tiny). Extended scenes can have peaks sharper than a point target's
+(interference); the margin covers that, and `bench.perf.correlate --section skips` measures it on the catalogue.
+
+Filter-aware skip: a pixel is kept by the filter iff max_z |V| >= G 10^(-thr/20) with G the image maximum.
+Under the condition above, max_z |V| <= coarse_max 10^(window/20), and G >= G_coarse, so a pixel whose
+coarse maximum is below G_coarse 10^(-(thr + window)/20) cannot be kept: it is not refined, its depth is NaN
+and its magnitude the coarse maximum (a lower bound; it stays below the filter).
+"""
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from methods.domain.antennas import AntennaArray
+from methods.ops.correlate import C_M_PER_S
+from methods.ops.depth_peak import peak_depth_m
+from methods.skips.roi import Roi, dilate, lattice
+
+Evaluate = Callable[[np.ndarray], np.ndarray]      # points (N, 3) m -> frequency-summed correlation (N,) complex
+BATCH_POINTS = 1 << 16                             # points per evaluate call (128 frequencies: 64 MB of phasors)
+
+
+@dataclass(frozen=True)
+class SearchPlan:
+    """Per searched pixel (N,): the coarse step in fine samples, and `loss_curve_db` (N, n_max): the point-target
+    loss at k dz / 2 for k = 1..n_max (the candidate window of a level of spacing k is loss_curve_db[:, k - 1] +
+    `margin_db`)."""
+
+    step: np.ndarray
+    loss_curve_db: np.ndarray
+    margin_db: float = 0.0
+
+    def candidate_db(self, spacing: np.ndarray) -> np.ndarray:
+        """Candidate window (N,) dB of a level whose samples are `spacing` (N,) fine samples apart."""
+        k = np.clip(spacing, 1, self.loss_curve_db.shape[1]) - 1
+        return self.loss_curve_db[np.arange(len(k)), k] + self.margin_db
+
+    @staticmethod
+    def every_sample(n_px: int) -> SearchPlan:
+        """Step 1 everywhere: every fine sample is evaluated (the full search over the given depths)."""
+        return SearchPlan(np.ones(n_px, dtype=int), np.zeros((n_px, 1)))
+
+    @staticmethod
+    def uniform(n_px: int, step: int, loss_curve_db: np.ndarray, margin_db: float = 0.0) -> SearchPlan:
+        """The same step and loss curve (n_max,) for every pixel."""
+        curve = np.asarray(loss_curve_db, dtype=float)
+        return SearchPlan(np.full(n_px, step), np.broadcast_to(curve, (n_px, len(curve))), margin_db)
+
+
+@dataclass
+class SearchResult:
+    """Per searched pixel: depth (NaN = filtered out by the skip, or peak on an ROI depth edge that is not a grid
+    edge), max projection, and the number of (pixel, depth) samples evaluated."""
+
+    depth_m: np.ndarray
+    max_projection: np.ndarray
+    n_evaluated: int
+
+
+def point_target_loss_db(freqs_hz: np.ndarray, antennas: AntennaArray, points_m: np.ndarray, offsets_m: np.ndarray
+                         ) -> np.ndarray:
+    """Worst (over the point targets `points_m` (K, 3) and both sides) drop in dB of |V(z)| at `offsets_m` (>= 0,
+    ascending) from the peak of each target's own depth profile (sampled every 0.25 mm around its depth).
+
+    For a point target the pair sum factorises: V(z) = sum_f A_f(z) B_f(z) with A_f = sum_r exp(j k_f (|p - rx_r|
+    - |p0 - rx_r|)) and B_f the same over tx, so a profile costs (n_rx + n_tx) F phasors per depth (float64)."""
+    fine_m = np.arange(-offsets_m[-1] - 0.004, offsets_m[-1] + 0.004 + 1e-12, 0.00025)
+    k = 2.0 * np.pi * np.asarray(freqs_hz, dtype=np.float64) / C_M_PER_S            # (F,)
+    worst = np.zeros(len(offsets_m))
+    for p in np.atleast_2d(points_m):
+        column = np.column_stack([np.full(len(fine_m), p[0]), np.full(len(fine_m), p[1]), p[2] + fine_m])
+
+        def side_sum(ant_m, column=column, p=p):
+            delta = (np.linalg.norm(column[:, None] - ant_m[None], axis=2)
+                     - np.linalg.norm(p[None] - ant_m, axis=1)[None])              # (Z, A) path change
+            return np.exp(1j * delta[:, :, None] * k[None, None]).sum(axis=1)    # (Z, F)
+        mag = np.abs((side_sum(antennas.rx_m) * side_sum(antennas.tx_m)).sum(axis=1))
+        peak_z = fine_m[np.argmax(mag)]
+        for side in (-1.0, 1.0):
+            at = np.interp(peak_z + side * offsets_m, fine_m, mag)
+            worst = np.maximum(worst, 20.0 * np.log10(mag.max() / np.maximum(at, 1e-30)))
+    return worst
+
+
+PROBE_RADII_M = tuple(np.round(np.arange(0.0, 0.2201, 0.02), 3))   # probe distances from the array axis, m
+
+
+@functools.lru_cache(maxsize=32)
+def _loss_by_radius(freqs_key: tuple[float, ...], antennas_key: bytes, z_near_m: float, dz_m: float, n_max: int
+                    ) -> np.ndarray:
+    """(len(PROBE_RADII_M), n_max) loss in dB at offsets k dz / 2 (k = 1..n_max), worst over 4 directions per
+    radius. Depends only on the frequencies, the array and the depth: computed once per process and configuration."""
+    antennas = _ANTENNAS[antennas_key]
+    freqs_hz = np.asarray(freqs_key)
+    offsets_m = np.arange(1, n_max + 1) * dz_m / 2.0
+    out = np.empty((len(PROBE_RADII_M), n_max))
+    for i, r in enumerate(PROBE_RADII_M):
+        d = r / np.sqrt(2.0)
+        probes = np.array([[r, 0.0], [0.0, r], [d, d], [d, -d]]) if r > 0 else np.zeros((1, 2))
+        points_m = np.column_stack([probes, np.full(len(probes), z_near_m)])
+        out[i] = point_target_loss_db(freqs_hz, antennas, points_m, offsets_m)
+    return out
+
+
+_ANTENNAS: dict[bytes, AntennaArray] = {}
+
+
+def plan_search(freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray, y_m: np.ndarray, z_near_m: float,
+                dz_m: float, max_loss_db: float, max_step_m: float, margin_db: float) -> SearchPlan:
+    """Per pixel (x_m, y_m) (N,): the largest coarse step (a multiple of dz_m, <= max_step_m) whose point-target
+    loss at half a step is <= max_loss_db, measured at the probe radius at or beyond the pixel's lateral distance
+    from the array axis and at the ROI's nearest depth z_near_m (where the depth of focus is shortest);
+    candidates within that loss + margin_db. (The loss grows off axis: there a depth step also leaves the
+    laterally narrow focus, which is tilted along the line of sight.)"""
+    n_max = max(1, int(np.floor(max_step_m / dz_m + 1e-9)))
+    key = np.ascontiguousarray(np.concatenate([antennas.rx_m.ravel(), antennas.tx_m.ravel()])).tobytes()
+    _ANTENNAS.setdefault(key, antennas)
+    loss = _loss_by_radius(tuple(np.asarray(freqs_hz, dtype=np.float64).tolist()), key, round(float(z_near_m), 6),
+                           float(dz_m), n_max)                                  # (radii, n_max)
+    # a pixel between two probe radii takes the larger loss of the two (the loss grows off axis, not strictly)
+    bracket = np.maximum(loss, np.vstack([loss[:1], loss[:-1]]))               # (radii, n_max)
+    ok = bracket <= max_loss_db
+    best = np.where(ok.any(axis=1), n_max - np.argmax(ok[:, ::-1], axis=1), 1)  # largest k with loss <= max
+    step_by_radius = np.minimum.accumulate(best[::-1])[::-1]                  # monotone: never larger farther out
+    radius = np.hypot(x_m, y_m)
+    ring = np.minimum(np.searchsorted(np.asarray(PROBE_RADII_M), radius - 1e-12), len(PROBE_RADII_M) - 1)
+    return SearchPlan(step=step_by_radius[ring].astype(int), loss_curve_db=bracket[ring], margin_db=margin_db)
+
+
+def _coarse_indices(n_z: int, step: int) -> np.ndarray:
+    k = np.arange(0, n_z, step)
+    return k if k[-1] == n_z - 1 else np.append(k, n_z - 1)
+
+
+class _Samples:
+    """|V| at (fine depth index, pixel), -1 where not evaluated; evaluates batches of (k, pixel) through `evaluate`."""
+
+    def __init__(self, evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray):
+        self.evaluate, self.x_m, self.y_m, self.z_m = evaluate, x_m, y_m, z_m
+        self.mag = np.full((len(z_m), len(x_m)), -1.0, dtype=np.float32)
+        self.count = 0
+
+    def run(self, k: np.ndarray, p: np.ndarray) -> None:
+        for start in range(0, len(k), BATCH_POINTS):      # bounded memory: correlate holds (F, batch) phasors
+            kb, pb = k[start:start + BATCH_POINTS], p[start:start + BATCH_POINTS]
+            points_m = np.column_stack([self.x_m[pb], self.y_m[pb], self.z_m[kb]])
+            self.mag[kb, pb] = np.abs(self.evaluate(points_m))
+        self.count += len(k)
+
+    def run_coarse(self, step: np.ndarray) -> np.ndarray:
+        """Evaluate each pixel's coarse samples (its `step`); returns the coarse maximum per pixel (N,)."""
+        n_z = len(self.z_m)
+        coarse_max = np.zeros(len(step), dtype=np.float32)
+        for s in np.unique(step):
+            pix = np.flatnonzero(step == s)
+            k_c = _coarse_indices(n_z, int(s))
+            pp, kk = np.meshgrid(pix, k_c, indexing="ij")     # pixel-major: a batch's points lie close together
+            self.run(kk.ravel(), pp.ravel())
+            coarse_max[pix] = self.mag[np.ix_(k_c, pix)].max(axis=0)
+        return coarse_max
+
+
+def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray, plan: SearchPlan,
+                 threshold_db: float | None, z_edges_are_grid_edges: tuple[bool, bool] = (True, True)
+                 ) -> SearchResult:
+    """Coarse-to-fine depth peak (module doc) of the pixels (x_m, y_m) (N,) over the equidistant depths z_m (n_z,).
+
+    Refinement halves the spacing level by level (ceil(s / 2)): around each candidate c of a level of spacing s,
+    c +- ceil(s / 2) are evaluated, and the candidates of the new level are the evaluated samples within its
+    window (loss at half the new spacing + margin) of the pixel's maximum so far; at spacing 1 the climb ends it.
+    A peak on a depth edge of z_m that is not an edge of the grid (`z_edges_are_grid_edges` False there: the ROI
+    cut the grid) gives NaN: the pixel's peak may lie outside the ROI. With step 1 every sample is evaluated.
+    """
+
+    n_z, n_px = len(z_m), len(x_m)
+    dz_m = float(z_m[1] - z_m[0]) if n_z > 1 else 1.0
+    spacing = np.minimum(plan.step, max(n_z - 1, 1))
+    samples = _Samples(evaluate, x_m, y_m, z_m)
+    coarse_max = samples.run_coarse(spacing)
+    window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)                     # (N,)
+    active = coarse_max > 0
+    if threshold_db is not None and active.any():
+        active &= coarse_max >= coarse_max.max() * 10.0 ** (-threshold_db / 20.0) * window
+    spacing = np.where(active, spacing, 1)
+    while (spacing > 1).any():
+        best = samples.mag.max(axis=0)                                         # unevaluated: -1, never the max
+        candidates = (samples.mag >= (best * window)[None]) & (spacing > 1)[None]
+        k, p = np.nonzero(candidates)
+        spacing = np.where(spacing > 1, (spacing + 1) // 2, spacing)
+        half = spacing[p]
+        k_new = np.concatenate([k - half, k + half])
+        p_new = np.concatenate([p, p])
+        inside = (k_new >= 0) & (k_new < n_z)
+        k_new, p_new = k_new[inside], p_new[inside]
+        fresh = samples.mag[k_new, p_new] < 0
+        key = np.unique(p_new[fresh].astype(np.int64) * n_z + k_new[fresh])     # pixel-major, no duplicates
+        samples.run(key % n_z, key // n_z)
+        window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)
+    _climb(samples, active)
+    depth_m = np.full(n_px, np.nan)
+    max_proj = coarse_max.astype(np.float64)
+    if active.any():
+        mag = samples.mag[:, active]
+        depth_m[active], max_proj[active] = peak_depth_m(mag, float(z_m[0]), dz_m)
+        k_best = np.argmax(mag, axis=0)
+        on_cut = ((k_best == 0) & (not z_edges_are_grid_edges[0])) | ((k_best == n_z - 1) &
+                                                                       (not z_edges_are_grid_edges[1]))
+        depth_m[np.flatnonzero(active)[on_cut]] = np.nan
+    return SearchResult(depth_m, max_proj, samples.count)
+
+
+def _climb(samples: _Samples, active: np.ndarray) -> None:
+    """Evaluate unevaluated neighbours of each active pixel's argmax until none is left."""
+    n_z = samples.mag.shape[0]
+    pixels = np.flatnonzero(active)
+    for _ in range(n_z):
+        if len(pixels) == 0:
+            return
+        k_best = np.argmax(samples.mag[:, pixels], axis=0)
+        new_k, new_p = [], []
+        for side in (-1, 1):
+            k = k_best + side
+            inside = (k >= 0) & (k < n_z)
+            missing = np.zeros(len(pixels), dtype=bool)
+            missing[inside] = samples.mag[k[inside], pixels[inside]] < 0
+            new_k.append(k[missing])
+            new_p.append(pixels[missing])
+        k, p = np.concatenate(new_k), np.concatenate(new_p)
+        if len(k) == 0:
+            return
+        order = np.argsort(p, kind="stable")
+        samples.run(k[order], p[order])
+        pixels = np.unique(p)
+
+
+def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray,
+               plan_of: Callable[[np.ndarray, np.ndarray], SearchPlan], threshold_db: float, lattice_step_px: int,
+               radius_px: int, keep_margin_db: float, margin_m: float) -> tuple[Roi, int]:
+    """The object's ROI from a coarse pass: depth samples at twice the search plan's coarse step (`plan_of(x, y)`)
+    at the lattice pixels (every `lattice_step_px`-th) of `pixels` (ny, nx) bool; x_m, y_m (ny, nx) pixel centres;
+    z_m the depths inside the current ROI.
+
+    Lattice pixels whose coarse maximum is within threshold + keep_margin_db of the lattice maximum mark the pixels
+    within `radius_px` in x and y; the depth range is their coarse peaks +- (that coarse step + margin_m). The
+    doubled step loses at most a few dB at a peak, inside keep_margin_db. Returns (the ROI within `pixels` and
+    z_m's range, samples evaluated)."""
+    grid_lattice = lattice(pixels, lattice_step_px)
+    x_l, y_l = x_m[grid_lattice], y_m[grid_lattice]
+    step = np.minimum(2 * plan_of(x_l, y_l).step, max(len(z_m) - 1, 1))
+    samples = _Samples(evaluate, x_l, y_l, z_m)
+    peak = samples.run_coarse(step)
+    peak_z = z_m[np.argmax(samples.mag, axis=0)]              # unevaluated samples hold -1: never the argmax
+    strong = peak >= peak.max() * 10.0 ** (-(threshold_db + keep_margin_db) / 20.0)
+    marked = np.zeros_like(pixels)
+    marked[grid_lattice] = strong
+    roi_pixels = dilate(marked, radius_px) & pixels
+    dz_m = z_m[1] - z_m[0] if len(z_m) > 1 else 0.0
+    pad_m = step[strong] * dz_m + margin_m
+    return (Roi(roi_pixels, float(np.min(peak_z[strong] - pad_m)), float(np.max(peak_z[strong] + pad_m)),
+                ("coarse",)), samples.count)

@@ -1,0 +1,122 @@
+"""Which skips a reconstruction uses (issue 11: "skip what a scene does not need"), and their parameters.
+
+Each skip evaluates less than the full grid and is measured against the full computation by
+`python -m bench.perf correlate --section skips` (time, speed-up, depth and metric change on every catalogue object).
+A skip
+is on by default (`default_for`, the `roi=auto` preset) only where its depth maps agree with the full computation
+within 0.1 mm on >= 99 % of the pixels valid in both and every metric within 1 % (notes/skips.md has the numbers).
+
+* `mask_bb`: evaluate only the pixels inside the x/y bounds of the capture's metadata `mask_bb` (methods.skips.roi).
+* `mask_bb_depth`: ... and only depths inside its z bounds (BP searches no depth outside them; the other methods
+  drop depths outside them). Not exact for two-frequency BP: a pixel whose strongest depth lies outside the box
+  can have a weaker local peak inside it, which the full computation never reports (measured 98.2 % agreement on
+  the plate); an object in front of the box holds the image maximum the filter is relative to; and a depth
+  dropped at the box's edge changes the metrics' triangulation of its in-box neighbours (notes/skips.md).
+* `coarse_roi`: BP without a sensor prior evaluates only the object's pixels and depth range, bounded by a coarse
+  pass on a pixel lattice (methods.skips.bp_search.coarse_roi) with the margins below.
+* `bp_coarse_to_fine`: BP searches each pixel's depth on a coarse step first and refines around the candidates;
+  pixels whose coarse maximum proves them below the filter are not refined (methods.skips.bp_search).
+* `bp_range_cpu`: BP with many frequencies on the CPU gathers from range-compressed profiles
+(methods.backends.cpu_range)
+  instead of summing every frequency.
+* `fsk_keep`: 2FSK's second pass and 3FSK's second and fine passes run only at pixels the filter can keep,
+  predicted on a pixel lattice (methods.skips.keep_skip).
+`NONE` (`roi=none`) turns every skip off: the computation of today, bit for bit.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+SKIP_NAMES = ("mask_bb", "mask_bb_depth", "coarse_roi", "bp_coarse_to_fine", "bp_range_cpu", "fsk_keep")
+
+
+@dataclass(frozen=True)
+class SkipSettings:
+    """Switches (see the module doc) and the margins they use."""
+
+    mask_bb: bool = False
+    mask_bb_depth: bool = False
+    coarse_roi: bool = False
+    bp_coarse_to_fine: bool = False
+    bp_range_cpu: bool = False
+    fsk_keep: bool = False
+    lattice_step_m: float = 0.003     # fsk_keep's lattice: a pixel every 3 mm in x and y (1/9 of 1 mm pixels)
+    keep_margin_db: float = 10.0      # a lattice pixel marks its neighbourhood when within threshold + 10 dB of the max
+    lattice_margin_m: float = 0.002   # the lattice neighbourhood: one lattice step + 2 mm in x and y
+    roi_lattice_step_m: float = 0.004  # coarse_roi's lattice (BP): a pixel every 4 mm (1/16 of 1 mm pixels) ...
+    roi_keep_margin_db: float = 6.0   # ... marking its neighbourhood when within threshold + 6 dB of the max
+    roi_margin_m: float = 0.01        # the coarse ROI's depth range: lattice peaks +- (lattice depth step + 1 cm)
+    psf_max_loss_db: float = 3.0      # coarse depth step: largest with <= 3 dB point-target loss at half a step
+    max_coarse_step_m: float = 0.01   # ... and at most 1 cm
+    candidate_margin_db: float = 1.0  # refine coarse samples within (that loss + 1 dB) of the pixel's coarse max
+
+    def lattice_px(self, pixel_pitch_m: float, step_m: float | None = None) -> tuple[int, int]:
+        """(lattice step, neighbourhood half-width) in pixels of `pixel_pitch_m` for a lattice of `step_m` (default
+        `lattice_step_m`): a step of 1 means no lattice (the pixels are already coarser than the lattice)."""
+        step = max(1, int(round((step_m or self.lattice_step_m) / pixel_pitch_m)))
+        return step, step + int(np.ceil(self.lattice_margin_m / pixel_pitch_m - 1e-9))
+
+    @property
+    def any(self) -> bool:
+        """Whether any skip is on."""
+        return any(getattr(self, name) for name in SKIP_NAMES)
+
+    def only(self, name: str) -> SkipSettings:
+        """These parameters with exactly one skip on (bench.perf.correlate measures each skip alone)."""
+        if name not in SKIP_NAMES:
+            raise ValueError(f"unknown skip {name!r}; choose one of {', '.join(SKIP_NAMES)}")
+        return dataclasses.replace(self, **{n: n == name for n in SKIP_NAMES})
+
+
+NONE = SkipSettings()
+ALL = SkipSettings(**dict.fromkeys(SKIP_NAMES, True))
+PRESETS = ("none", "auto", "all")
+
+
+def default_for(method: str, n_freqs: int, dense_beats_search: bool = False) -> SkipSettings:
+    """The skips on by default (`roi=auto`) for a method, frequency count and backend: those measured to agree with
+    the full computation on every catalogue object and to save time there (notes/skips.md, notes/gpu.md).
+    `mask_bb_depth` stays off: cutting BP's depth search at the box moved 1.8 % of two-frequency BP's depths on the
+    plate and, where an object lies in front of the box (the two objects at 30 cm: one at 25 cm, zmin 26 cm), it
+    removes the image maximum, so the -14 dB filter keeps other pixels (BP_max metrics moved 48 %); for 2FSK, 3FSK
+    and MM-2FSK dropping depths outside the box changes which in-box pixels the metrics' triangulation keeps (up to
+    5 %), for no time saved. On a backend whose `dense_beats_search` is set (Warp: "cuda", "warp-cpu") the dense
+    kernels are cheaper than the host-driven searches for few frequencies (H100, new frames, catalogue at 30 cm:
+    two-frequency BP 792 ms with the coarse ROI and coarse-to-fine search against 41 ms for the whole volume; 2FSK
+    d05 18.5 ms with `fsk_keep` against 9.9 ms; 3FSK 21.8 against 16.5 ms; two-frequency BP with the coarse ROI
+    evaluated as the dense volume over its bounding box, bp._box_depth_m, 54.8 against 40.5 ms), so there only
+    `mask_bb` stays on for them; BP with many frequencies keeps the coarse ROI and the search (145 against 519 ms,
+    notes/gpu.md)."""
+    if method == "bp":
+        if dense_beats_search and n_freqs <= 3:
+            return SkipSettings(mask_bb=True)
+        return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True)
+    if dense_beats_search:
+        return SkipSettings(mask_bb=True)
+    return SkipSettings(mask_bb=True, fsk_keep=True)
+
+
+def resolve(roi: str | Mapping | SkipSettings | None, method: str = "bp", n_freqs: int = 2,
+            dense_beats_search: bool = False) -> SkipSettings:
+    """SkipSettings from a preset name ('none', 'auto' = `default_for(method, n_freqs, dense_beats_search)`, 'all'), a
+    mapping of
+    fields (a Hydra `roi` config; its `name` key is ignored, an optional `preset` key gives the base, default
+    'none'), an instance, or None (= 'auto')."""
+    if roi is None:
+        roi = "auto"
+    if isinstance(roi, SkipSettings):
+        return roi
+    if isinstance(roi, str):
+        if roi not in PRESETS:
+            raise ValueError(f"roi must be one of {', '.join(PRESETS)} or a mapping of skip settings, got {roi!r}")
+        return {"none": NONE, "all": ALL}.get(roi) or default_for(method, n_freqs, dense_beats_search)
+    fields = {k: v for k, v in dict(roi).items() if k not in ("name", "preset")}
+    known = {f.name for f in dataclasses.fields(SkipSettings)}
+    unknown = set(fields) - known
+    if unknown:
+        raise ValueError(f"unknown roi setting(s) {', '.join(sorted(unknown))}; allowed: {', '.join(sorted(known))}")
+    return dataclasses.replace(resolve(dict(roi).get("preset", "none"), method, n_freqs, dense_beats_search), **fields)

@@ -1,0 +1,133 @@
+"""What a run writes, made cheap without changing it (issue 13 item 5): results.csv grows by appended lines
+(bench.harness.results.ResultsCsv) with the same rows as a whole rewrite, and the rows of finished frames survive an
+interruption of a long sequence; the store's compressed arrays are copied into arrays.h5, so a run with the store,
+its cached re-run and a run without it write the same files; the depth preview's colours are matplotlib's."""
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.harness.results import ResultsCsv, write_results
+
+FRAMES = 10
+
+
+def test_appended_rows_read_back_as_the_rewritten_table(tmp_path):
+    rng = np.random.default_rng()
+    rows = []
+    for i in range(25):
+        row = {"object": "01_plate", "distance": 30, "frame": i, "method": "mm2fsk", "P_cm": rng.random(),
+               "roi_px": None if i % 3 else int(rng.integers(1000)), "failure": "" if i % 4 else "no valid, pixel"}
+        if i >= 7:
+            row["t_search_ms"] = rng.random()       # a column appearing mid-run: the header is rewritten
+        if i == 11:
+            row["C_g_cm"] = float("nan")
+        rows.append(row)
+    appended = ResultsCsv(tmp_path / "appended.csv")
+    for row in rows:
+        appended.add(row)
+    write_results(tmp_path / "whole.csv", rows)
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "appended.csv"), pd.read_csv(tmp_path / "whole.csv"))
+
+
+@pytest.fixture(scope="module")
+def long_sequence(synth_capture):
+    """A static plate seen in FRAMES radar frames (16 frequencies: cheap)."""
+    return synth_capture("01_plate", 30, frames=FRAMES, frequency_points=16)
+
+
+def _config(root, store):
+    from hydra import compose, initialize_config_dir
+
+    from bench.harness.app import CONFIG_DIR
+
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        return compose(config_name="config", overrides=[
+            "method=mm2fsk", "freq=d10", "prior=realsense", "dataset=maroon", f"dataset.root={root}",
+            "dataset.frame=all", f"store.dir={store}"])
+
+
+def test_rows_of_finished_frames_survive_an_interruption_and_the_rerun_completes_them(long_sequence, tmp_path,
+                                                                                       monkeypatch):
+    from bench.harness import app
+
+    cfg = _config(long_sequence.parent.parent, tmp_path / "store")
+    write_depth, written = app.write_depth, []
+
+    def interrupted_at_frame_7(out_dir, stem, *args):
+        if len(written) == 7:
+            raise KeyboardInterrupt                   # Ctrl-C (or a killed job) while the 8th frame is written
+        written.append(stem)
+        return write_depth(out_dir, stem, *args)
+
+    monkeypatch.setattr(app, "write_depth", interrupted_at_frame_7)
+    with pytest.raises(KeyboardInterrupt):
+        app.run(cfg, tmp_path / "run")
+    kept = pd.read_csv(tmp_path / "run" / "results.csv")
+    assert list(kept.frame) == list(range(7)) and kept.P_cm.notna().all()
+    monkeypatch.setattr(app, "write_depth", write_depth)
+    rows = app.run(cfg, tmp_path / "run")                  # the same run directory: the file starts anew
+    table = pd.read_csv(tmp_path / "run" / "results.csv")
+    assert list(table.frame) == list(range(FRAMES))
+    assert [r["cached"] for r in rows] == [True] * 8 + [False] * (FRAMES - 8)    # frame 7 was stored, not written
+    pd.testing.assert_frame_equal(table.iloc[:7].drop(columns="cached"), kept.drop(columns="cached"))
+    np.testing.assert_allclose(table.P_cm, [r["P_cm"] for r in rows], rtol=1e-15)
+
+
+def test_preview_colours_are_matplotlibs():
+    from matplotlib import colormaps
+
+    from bench.harness.results import NO_DEPTH_GREY, PREVIEW_COLORMAP, preview_rgb
+
+    rng = np.random.default_rng()
+    scaled = rng.random((60, 70))
+    scaled[rng.random(scaled.shape) < 0.3] = np.nan
+    scaled.flat[:4] = [0.0, 1.0, np.nextafter(1.0, 0.0), 0.5]
+    reference = colormaps[PREVIEW_COLORMAP].with_extremes(bad=NO_DEPTH_GREY)(np.ma.masked_invalid(scaled),
+                                                                             bytes=True)[..., :3]
+    np.testing.assert_array_equal(preview_rgb(scaled), reference)
+
+
+def _written(run_dir):
+    """Everything a run wrote, the store's key and the cached flag left out."""
+    rows = pd.read_csv(run_dir / "results.csv").drop(columns=["key", "cached"])
+    with h5py.File(run_dir / "arrays.h5", "r") as h5:
+        arrays = {f"{stem}/{name}": (h5[stem][name][()], h5[stem][name].dtype, h5[stem][name].compression)
+                  for stem in h5 for name in h5[stem]}
+        attrs = {stem: {k: np.asarray(v).tolist() for k, v in h5[stem].attrs.items() if k != "key"} for stem in h5}
+    files = {p.relative_to(run_dir).as_posix(): p.read_bytes() for folder in ("depth", "depth_preview")
+             for p in sorted((run_dir / folder).iterdir())}
+    return rows, arrays, attrs, files
+
+
+@pytest.mark.parametrize("cell", ["mm2fsk_d10", "2fsk_d05"])
+def test_runs_with_and_without_the_store_write_the_same_files(synth_root, tmp_path, cell):
+    from hydra import compose, initialize_config_dir
+
+    from bench.harness import app
+
+    def run(name, store):
+        with initialize_config_dir(config_dir=str(app.CONFIG_DIR), version_base="1.3"):
+            cfg = compose(config_name="config", overrides=[
+                f"cell={cell}", "dataset=maroon", f"dataset.root={synth_root}", f"store.dir={store}"])
+        app.run(cfg, tmp_path / name)
+        return _written(tmp_path / name)
+
+    plain = run("plain", "null")
+    stored, cached = run("stored", tmp_path / "store"), run("cached", tmp_path / "store")
+    for other in (stored, cached):
+        pd.testing.assert_frame_equal(other[0].drop(columns=[c for c in other[0] if c.startswith("t_")]
+                                                    + ["runtime_ms"]),
+                                      plain[0].drop(columns=[c for c in plain[0] if c.startswith("t_")]
+                                                    + ["runtime_ms"]))
+        assert other[1].keys() == plain[1].keys() and other[2] == plain[2] and other[3] == plain[3]
+        for name, (values, dtype, compression) in plain[1].items():
+            np.testing.assert_array_equal(other[1][name][0], values)
+            assert other[1][name][1:] == (dtype, compression)
+    pd.testing.assert_frame_equal(cached[0], stored[0])               # the cached rows are the stored ones
+    info = json.loads(plain[3]["depth/01_plate_30_000000.json"])
+    assert info["grid_size"][:2] == [301, 301]

@@ -1,0 +1,149 @@
+"""Table I from the frequency grid matches the paper; the Hydra frequency configs match the methods' table."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from bench.report.tables import table1
+from methods.ops.frequencies import CONFIGS_GHZ
+
+PAPER_TABLE1 = {  # config: (f1_GHz, f2_GHz, dd_max_cm), paper Table I
+    "d05": (81.45, 82.00, 13.60), "d1": (80.98, 82.00, 7.32), "d2": (79.95, 82.00, 3.66),
+    "d4": (77.91, 82.00, 1.83), "d8": (73.97, 82.00, 0.93), "d10": (72.00, 82.00, 0.75),
+}
+
+
+def test_table1_matches_the_paper_to_two_decimals():
+    table = table1().set_index("config")
+    assert list(table.columns) == ["delta_f_GHz", "f1_GHz", "f2_GHz", "dd_max_cm"]
+    for name, (f1, f2, dd_max) in PAPER_TABLE1.items():
+        assert round(table.loc[name, "f1_GHz"], 2) == pytest.approx(f1)
+        assert round(table.loc[name, "f2_GHz"], 2) == pytest.approx(f2)
+        assert round(table.loc[name, "dd_max_cm"], 2) == pytest.approx(dd_max)
+
+
+@pytest.mark.parametrize("name", sorted(CONFIGS_GHZ))
+def test_frequency_config_files_match_the_table(name):
+    path = Path(__file__).parents[3] / "configs" / "freq" / f"{name}.yaml"
+    config = yaml.safe_load(path.read_text())
+    assert config["name"] == name
+    expected = CONFIGS_GHZ[name]
+    assert config["f_ghz"] == (None if expected is None else list(expected))
+
+
+def _rows(cells, captures=("01_plate", "03_sphere")):
+    """Result rows with P_cm etc. = the given per-cell value on every capture, timed alone."""
+    import pandas as pd
+
+    return pd.DataFrame([{"object": obj, "distance": 30, "frame": 0, "method": m, "freq": f, "prior": p,
+                          "grid": "g", "device": "cpu", "runtime_ms": 1.0, "timing": "alone", "C_g_cm": v,
+                          "C_s_cm": v, "P_cm": v + i, "P_e_cm": v, "off_pct": 0.0, "off_err_cm": float("nan"),
+                          "off_px": 0, "failure": ""}
+                         for m, f, p, v in cells for i, obj in enumerate(captures)])
+
+
+def test_row_labels_follow_the_paper():
+    from bench.report.tables import row_label
+
+    assert [row_label("bp", "full"), row_label("bp", "d05"), row_label("mm2fsk", "d10"),
+            row_label("3fsk", "d1_d10")] == ["BP_max", "BP Δ0.5", "MM-2FSK Δ10.0", "3FSK(Δ1.0, Δ10.0)"]
+
+
+def test_summary_averages_over_captures_orders_like_the_paper_and_marks_the_best():
+    from bench.report.tables import summarise, summary_latex, summary_markdown
+
+    rows = _rows([("mm2fsk", "d10", "realsense", 0.5), ("bp", "d05", "none", 0.7), ("bp", "full", "none", 0.1),
+                  ("2fsk", "d05", "none", 2.0)])
+    summary = summarise(rows)
+    assert list(summary.row) == ["BP_max", "BP Δ0.5", "2FSK Δ0.5", "MM-2FSK Δ10.0"]
+    assert summary.set_index("row").loc["BP Δ0.5", "P_cm"] == pytest.approx(1.2)   # mean of 0.7 and 1.7
+    assert (summary.captures == 2).all() and (summary.ok == 2).all() and summary.comparable.all()
+    markdown = summary_markdown(summary)
+    assert "| MM-2FSK Δ10.0 | 2/2 | **0.50** | **0.50** | **1.00** | **0.50** |" in markdown   # BP_max is not "best"
+    assert r"\textbf{0.50}" in summary_latex(summary, "caption")
+
+
+def test_tables_cli_reads_a_results_csv(tmp_path):
+    import subprocess
+    import sys
+
+    _rows([("mm2fsk", "d05", "photogrammetry", 2.0), ("mm2fsk", "d10", "photogrammetry", 0.2)]).to_csv(
+        tmp_path / "rows.csv", index=False)
+    result = subprocess.run([sys.executable, "-m", "bench.report.tables", "table2", "--results",
+                             str(tmp_path / "rows.csv"),
+                             "--csv", str(tmp_path / "t.csv"), "--latex", str(tmp_path / "t.tex")],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert "| MM-2FSK Δ10.0 | 2/2 | **0.20** |" in result.stdout and "2 captures (01_plate, 03_sphere)" in result.stdout
+    assert r"\begin{table}" in (tmp_path / "t.tex").read_text()
+
+
+def test_a_failed_capture_is_counted_flagged_and_never_ranked():
+    from bench.report.tables import summarise, summary_markdown
+
+    rows = _rows([("mm2fsk", "d10", "realsense", 0.5), ("2fsk", "d05", "none", 0.1)],
+                 captures=("01_plate", "03_sphere", "05_steps"))
+    failed = (rows.method == "2fsk") & (rows.object == "05_steps")
+    rows.loc[failed, ["P_cm", "failure"]] = [float("nan"), "no radar point inside mask_bb"]
+    rows.loc[failed, "C_g_cm"] = 50.0               # a metric that still exists does not make the capture count
+    summary = summarise(rows).set_index("row")
+    fsk = summary.loc["2FSK Δ0.5"]
+    assert (fsk.ok, fsk.captures, fsk.comparable) == (2, 3, False)
+    assert fsk.C_g_cm == pytest.approx(0.1) and fsk.P_cm == pytest.approx(0.6)   # every metric over the same 2
+    markdown = summary_markdown(summarise(rows))
+    assert "| 2FSK Δ0.5 † | 2/3 | 0.10 | 0.10 | 0.60 | 0.10 |" in markdown     # best 0.10 is not bold
+    assert "| MM-2FSK Δ10.0 | 3/3 | **0.50** |" in markdown
+
+
+def test_a_missing_row_is_a_failure_and_contended_runtimes_are_not_shown():
+    from bench.report.tables import summarise
+
+    rows = _rows([("mm2fsk", "d10", "realsense", 0.5), ("bp", "d05", "none", 2.0)])
+    rows = rows.drop(index=rows.index[(rows.method == "bp") & (rows.object == "03_sphere")])
+    rows.loc[rows.method == "mm2fsk", "timing"] = "parallel"
+    summary = summarise(rows).set_index("row")
+    assert summary.loc["BP Δ0.5", "ok"] == 1 and not summary.loc["BP Δ0.5", "comparable"]
+    assert np.isnan(summary.loc["MM-2FSK Δ10.0", "runtime_ms"])
+    assert summary.loc["BP Δ0.5", "runtime_ms"] == pytest.approx(1.0)
+
+
+def test_caption_describes_the_rows_it_holds():
+    from bench.report.tables import caption
+
+    text = caption("table2", _rows([("2fsk", "d05", "none", 1.0)]))
+    assert "2FSK with the scalar prior" in text and "MM-2FSK" not in text
+
+
+def _latex_engine() -> str | None:
+    """pdflatex, installed from Debian if missing and possible (skip reason otherwise)."""
+    import shutil
+    import subprocess
+
+    if shutil.which("pdflatex") is None and shutil.which("apt-get") is not None:
+        sudo = [] if os.geteuid() == 0 else ["sudo", "-n"]
+        subprocess.run([*sudo, "apt-get", "install", "-y", "-q", "--no-install-recommends", "texlive-latex-base",
+                        "texlive-latex-recommended"], capture_output=True, timeout=600)
+    return shutil.which("pdflatex")
+
+
+def test_latex_tables_compile(tmp_path):
+    import subprocess
+
+    from bench.report.tables import caption, styler_latex, summarise, summary_latex
+
+    engine = _latex_engine()
+    if engine is None:
+        pytest.skip("no pdflatex and it could not be installed (apt-get texlive-latex-base texlive-latex-recommended)")
+    rows = _rows([("mm2fsk", "d10", "realsense", 0.5), ("bp", "full", "none", 0.1), ("3fsk", "d05_d10", "none", 2.0)])
+    rows.loc[0, "failure"] = "no valid pixel"
+    tables = [summary_latex(summarise(rows), caption("table3", rows) + " 100% of_all & #1 {x} ~ ^ $"),
+              styler_latex(table1(), "Table I_x")]
+    document = "\\documentclass{article}\n\\usepackage{booktabs}\n\\begin{document}\n%s\n\\end{document}\n"
+    (tmp_path / "t.tex").write_text(document % "\n".join(tables))
+    result = subprocess.run([engine, "-interaction=nonstopmode", "-halt-on-error", "t.tex"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stdout[-2000:]

@@ -1,0 +1,127 @@
+"""MM-2FSK's whole new frame as one CUDA graph (`warp_backend.frame_graph`) equals the step-by-step device path
+(`warp_backend.prior.realsense_prior` with the scanline fill, then `warp_backend.fsk.depth_at_prior`) on fresh
+random frames: the same prior, covered count and valid pixels, depths within 1e-12 m (each slot is computed
+alone, so its order in the compaction changes nothing). On Warp-CPU the same launches run without a graph."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from methods.ops.frequencies import config_indices
+
+from devices import CUDA
+from methods_scenes import ANTENNAS, CAMERA, MAROON_FREQS_HZ, plane_depth_frame, realsense2radar, simulate, square_grid
+
+
+def _mm2fsk_setting(device):
+    """The MM-2FSK graph tests' setting: backend, fresh generator, camera transform, 61 x 61 grid, the Δ10 pair and
+    the camera's pixel rows and columns."""
+    from methods.backends import backend_for
+
+    return (backend_for(device), np.random.default_rng(), realsense2radar(), square_grid(0.05, 61),
+            MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, "d10")], np.mgrid[:CAMERA.height, :CAMERA.width])
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_frame_graph_equals_the_step_by_step_device_path(device):
+    from methods.backends.warp import fsk
+    from methods.backends.warp.frame_graph import frame_graph
+    from methods.backends.warp.prior import realsense_prior
+    from methods.ops.timing import StageTimer
+
+    backend, rng, cam2radar, grid, freqs_hz, (rows, cols) = _mm2fsk_setting(device)
+    for _ in range(2):
+        z0 = rng.uniform(0.28, 0.34)
+        frame = plane_depth_frame(z0, rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), cam2radar,
+                                  mask=(cols - 320) ** 2 + (rows - 240) ** 2 < rng.uniform(80, 200) ** 2)
+        r0, c0 = rng.integers(180, 300), rng.integers(260, 380)
+        frame.depth_mm[(rows - r0) ** 2 + (cols - c0) ** 2 < rng.uniform(5, 25) ** 2] = 0      # a camera hole
+        points = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), np.full(40, z0)])
+        signal = simulate(points, np.exp(2j * np.pi * rng.random(40)), freqs_hz)
+        keep_ratio = 10.0 ** (-14.0 / 20.0)
+        step = realsense_prior(backend.buffers, frame, cam2radar, grid, fill="scanline")
+        expected = fsk.depth_at_prior(backend.buffers, lambda p, signal=signal: backend.make_launch(
+            signal, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m, points_m=p, reuse=True)(), signal, freqs_hz, grid, step,
+            keep_ratio, StageTimer())
+        graph = frame_graph(backend.buffers, frame, cam2radar, grid, 10.0, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m,
+                            keep_ratio)
+        depth_m, magnitude, prior_m, n_covered, n_used = graph.run(frame, signal)
+        assert n_covered == n_used == step.n_covered > 100
+        for got, want in zip((depth_m, magnitude, prior_m), expected, strict=False):
+            assert np.array_equal(np.isfinite(got), np.isfinite(want))
+            assert np.max(np.abs(got - want), where=np.isfinite(want), initial=0.0) < 1e-12
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+@pytest.mark.parametrize("freq", ["d05", "d05_d10"])
+def test_fsk_graph_equals_the_step_by_step_device_path(device, freq):
+    from methods.backends import backend_for
+    from methods.backends.warp import fsk
+    from methods.backends.warp.frame_graph import fsk_graph
+    from methods.ops.timing import StageTimer
+
+    backend = backend_for(device)
+    rng = np.random.default_rng()
+    grid = square_grid(0.04, 41)
+    freqs_hz = MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, freq)]
+    three = len(freqs_hz) == 3
+    pixels = rng.random(grid.image_shape) < 0.8
+    z0 = rng.uniform(0.33, 0.45)
+    points = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), np.full(40, z0)])
+    signal = simulate(points, np.exp(2j * np.pi * rng.random(40)), freqs_hz)
+    keep_ratio = 10.0 ** (-14.0 / 20.0)
+
+    def correlator(sig, hz):
+        return lambda p: backend.make_launch(sig, hz, ANTENNAS.tx_m, ANTENNAS.rx_m, points_m=p, reuse=True)()
+    pair = [1, 2] if three else [0, 1]
+    if three:
+        coarse = np.ascontiguousarray(signal[:, :, pair])
+        *expected, details = fsk.three_fsk(backend.buffers, correlator(coarse, freqs_hz[pair]),
+                                           correlator(signal, freqs_hz), grid, pixels, freqs_hz, freqs_hz[pair], 0.40,
+                                           keep_ratio, StageTimer())
+    else:
+        *expected, details = fsk.two_pass(backend.buffers, correlator(signal, freqs_hz), grid, pixels, freqs_hz, 0.40,
+                                          keep_ratio, False, StageTimer())
+    maps, (z1_m, ref) = fsk_graph(backend.buffers, grid, pixels, freqs_hz, pair, three, ANTENNAS.tx_m, ANTENNAS.rx_m,
+                                  0.40, keep_ratio).run(signal)
+    assert (ref, z1_m) == (details["reference_pixel"], pytest.approx(details["z1_m"], abs=1e-12))
+    assert np.isfinite(maps[0]).sum() > 50
+    for got, want in zip(maps, expected, strict=False):
+        assert np.array_equal(np.isfinite(got), np.isfinite(want))
+        assert np.max(np.abs(got - want), where=np.isfinite(want), initial=0.0) < 1e-12
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_frame_graph_restricts_to_the_roi_as_the_host_path_does(device):
+    """A mask_bb-like region of interest: the graph correlates only the prior's pixels inside it and filters
+    relative to their maximum, as MM-2FSK's host path does with the same prior image and backend."""
+    from methods.backends.warp.prior import DeferredPrior
+    from methods.mm2fsk import reconstruct_mm2fsk
+    from methods.prior.image import HostPrior
+    from methods.skips.roi import Roi
+
+    backend, rng, cam2radar, grid, freqs_hz, (rows, cols) = _mm2fsk_setting(device)
+    z0 = rng.uniform(0.28, 0.34)
+    frame = plane_depth_frame(z0, 0.1, -0.1, cam2radar, mask=(cols - 320) ** 2 + (rows - 240) ** 2 < 150 ** 2)
+    points = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), np.full(40, z0)])
+    signal = simulate(points, np.exp(2j * np.pi * rng.random(40)), freqs_hz)
+    pixels = np.zeros(grid.image_shape, bool)
+    pixels[10:45, 5:40] = True
+    roi = Roi(pixels, 0.2, 0.5, ("mask_bb",))
+    deferred = DeferredPrior(backend.buffers, frame, cam2radar, grid, 10.0)
+    if device == "warp-cpu":            # Warp-CPU's backend builds host priors: run the graph path by hand
+        from methods.backends.warp.frame_graph import frame_graph
+        got_depth, got_mag, prior_m, n_covered, n_used = frame_graph(
+            backend.buffers, frame, cam2radar, grid, 10.0, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m,
+            10.0 ** (-14.0 / 20.0)).run(frame, signal, pixels)
+    else:
+        got = reconstruct_mm2fsk(signal, freqs_hz, ANTENNAS, grid, deferred, backend=backend, roi=roi)
+        got_depth, got_mag, prior_m = got.depth_m, got.magnitude, got.extra["prior_depth_m"]
+        n_used = got.extra["prior_pixels"]
+    expected = reconstruct_mm2fsk(signal, freqs_hz, ANTENNAS, grid, HostPrior(prior_m, grid), backend=backend,
+                                  roi=roi)
+    assert n_used == expected.extra["prior_pixels"] == (np.isfinite(prior_m) & pixels).sum() > 100
+    valid, reference = np.isfinite(got_depth), np.isfinite(expected.depth_m)
+    assert not valid[~pixels].any() and np.mean(valid != reference) <= 0.002
+    assert np.max(np.abs(got_depth - expected.depth_m)[valid & reference]) < 1e-6
+    assert np.array_equal(np.isfinite(got_mag), np.isfinite(expected.magnitude))

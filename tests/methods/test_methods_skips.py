@@ -1,0 +1,283 @@
+"""Skips and region of interest (methods.skips.settings, methods.skips.roi, methods.skips.bp_search,
+methods.skips.keep_skip,
+methods.backends.cpu_range): `roi=none` is today's computation bit for bit; every fast path against its float64
+reference on
+fresh random inputs; the coarse-to-fine condition; point targets with every skip on; agreement on a small
+synthetic capture."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from methods import reconstruct
+from methods.backends import correlate_volume
+from methods.backends.cpu_range import correlate_range, path_bounds_m, range_table
+from methods.bp import peak_depth_m
+from methods.domain.capture import RadarGrid
+from methods.fsk import correlate_pixels, mean_phasor_magnitude, two_pass_depth_m
+from methods.fsk3 import slope_correction_m
+from methods.ops import range_compression
+from methods.ops.correlate import correlate_reference
+from methods.ops.filtering import filter_depth
+from methods.ops.frequencies import config_indices
+from methods.skips.bp_search import SearchPlan, search_depth
+from methods.skips.roi import dilate, full_roi, roi_from_mask_bb
+from methods.skips.settings import ALL, NONE, SkipSettings, default_for, resolve
+
+from devices import CUDA
+from methods_scenes import ANTENNAS, MAROON_FREQS_HZ, TABLE1_FREQS_HZ, add_noise, make_capture, plate_points_m, simulate
+
+GRID = RadarGrid((-0.02, -0.02, 0.27), (0.02, 0.02, 0.35), (21, 21, 81))        # 2 mm pixels, 1 mm depth steps
+SCATTERERS_M = np.array([[0.004, -0.006, 0.300], [-0.010, 0.008, 0.318], [0.012, 0.010, 0.290]])
+
+
+def fresh_rng(record_property) -> np.random.Generator:
+    """An unseeded generator whose seed the test report records (a failure can be replayed)."""
+    seed = int(np.random.SeedSequence().entropy % (2 ** 32))
+    record_property("seed", seed)
+    return np.random.default_rng(seed)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """Three point scatterers with noise, the Table I frequencies, on GRID."""
+    signal = add_noise(simulate(SCATTERERS_M, np.array([1.0, 0.7, 0.5]), TABLE1_FREQS_HZ), snr_db=20.0)
+    return make_capture(signal, TABLE1_FREQS_HZ, GRID)
+
+
+def same(a: np.ndarray, b: np.ndarray) -> None:
+    np.testing.assert_array_equal(a, b)          # NaN == NaN here
+
+
+# ---- roi=none is today's computation -----------------------------------------------------------------------
+
+
+def test_roi_none_is_todays_bp(scene):
+    rec = reconstruct(scene, "bp", "d10", roi="none")
+    sig = scene.radar.signal[:, :, [0, 6]]
+    volume = correlate_volume(sig, TABLE1_FREQS_HZ[[0, 6]], ANTENNAS.tx_m, ANTENNAS.rx_m, GRID.x_m, GRID.y_m[::-1],
+                              GRID.z_m)
+    depth_m, peak = peak_depth_m(np.abs(volume), float(GRID.z_m[0]), float(GRID.z_m[1] - GRID.z_m[0]))
+    same(rec.depth_m, filter_depth(depth_m, peak))
+    same(rec.magnitude, peak)
+
+
+def test_roi_none_is_todays_2fsk_and_3fsk(scene):
+    x_m, y_m = (a.ravel() for a in GRID.pixel_xy_m())
+    timer = __import__("methods.ops.timing", fromlist=["StageTimer"]).StageTimer()
+    sig2, f2 = scene.radar.signal[:, :, [5, 6]], TABLE1_FREQS_HZ[[5, 6]]
+    depth_m, phasors, _ = two_pass_depth_m(sig2, f2, ANTENNAS, x_m, y_m, 0.40, "cpu", timer)
+    magnitude = mean_phasor_magnitude(phasors).reshape(GRID.image_shape)
+    rec = reconstruct(scene, "2fsk", "d05", roi="none")
+    same(rec.depth_m, filter_depth(depth_m.reshape(GRID.image_shape), magnitude))
+    same(rec.magnitude, magnitude)
+
+    f3 = TABLE1_FREQS_HZ[[0, 5, 6]]
+    coarse_m, _, _ = two_pass_depth_m(scene.radar.signal[:, :, [5, 6]], f3[1:], ANTENNAS, x_m, y_m, 0.40, "cpu", timer)
+    fine = correlate_pixels(scene.radar.signal[:, :, [0, 5, 6]], f3, ANTENNAS, x_m, y_m, coarse_m, "cpu")
+    depth3 = (coarse_m - slope_correction_m(fine, f3)).reshape(GRID.image_shape)
+    rec3 = reconstruct(scene, "3fsk", "d05_d10", roi="none")
+    same(rec3.depth_m, filter_depth(depth3, mean_phasor_magnitude(fine).reshape(GRID.image_shape)))
+
+
+def test_dilate_is_the_binary_dilation_by_the_square():
+    from scipy import ndimage
+    rng = np.random.default_rng()
+    for _ in range(20):
+        mask = rng.random((int(rng.integers(1, 80)), int(rng.integers(1, 80)))) < rng.uniform(0, 0.05)
+        radius = int(rng.integers(0, 7))
+        square = np.ones((2 * radius + 1, 2 * radius + 1), dtype=bool)
+        expected = ndimage.binary_dilation(mask, structure=square) if mask.any() else mask
+        assert np.array_equal(dilate(mask, radius), expected)
+
+
+def test_roi_settings():
+    assert resolve("none") == NONE and resolve("all") == ALL
+    assert resolve(None, "bp", 2) == default_for("bp", 2) and not default_for("bp", 128).mask_bb_depth
+    assert resolve({"name": "x", "preset": "none", "bp_coarse_to_fine": True}) == SkipSettings(bp_coarse_to_fine=True)
+    with pytest.raises(ValueError, match="unknown roi setting"):
+        resolve({"bogus": 1})
+    with pytest.raises(ValueError, match="roi must be one of"):
+        resolve("most")
+    assert ALL.only("fsk_keep") == dataclasses.replace(NONE, fsk_keep=True)
+    # Warp devices: the dense kernels beat the host-driven searches for few frequencies (notes/gpu.md)
+    assert resolve("auto", "bp", 2, True) == SkipSettings(mask_bb=True) == default_for("2fsk", 2, True)
+    assert default_for("bp", 128, True).bp_coarse_to_fine and default_for("2fsk", 2, False).fsk_keep
+    assert SkipSettings().lattice_px(0.001) == (3, 5) and SkipSettings().lattice_px(0.006)[0] == 1   # no lattice
+
+
+# ---- fast paths against float64 references -------------------------------------------------------------------
+
+
+def test_range_cpu_matches_the_float64_direct_sum(record_property):
+    rng = fresh_rng(record_property)
+    freqs_hz = MAROON_FREQS_HZ[:32]                                    # equidistant, df = 79 MHz
+    signal = (rng.standard_normal((94, 94, 32)) + 1j * rng.standard_normal((94, 94, 32))).astype(np.complex64)
+    points_m = np.column_stack([rng.uniform(-0.15, 0.15, 40), rng.uniform(-0.15, 0.15, 40), rng.uniform(0.2, 0.5, 40)])
+    got = correlate_range(signal, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m, points_m)
+    ref = correlate_reference(signal, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m, points_m, sum_freqs=True)
+    # linear interpolation at Q = 32: worst-case amplitude error pi^2 / (8 Q^2) = 0.12 % (methods.backends.cpu_range)
+    assert np.linalg.norm(got - ref) / np.linalg.norm(ref) < 2e-3
+
+
+def test_range_table_is_the_fft_range_profile(record_property):
+    rng = fresh_rng(record_property)
+    freqs_hz = MAROON_FREQS_HZ[:32]
+    signal = (rng.standard_normal((94, 94, 32)) + 1j * rng.standard_normal((94, 94, 32))).astype(np.complex64)
+    table = range_table(signal, freqs_hz, 0.5, 0.9)
+    rplan = range_compression.plan(freqs_hz, 32)
+    profiles = range_compression.profiles_numpy(signal / (94 * 94), rplan)         # float64 FFT
+    columns = (table.m0 + np.arange(table.n_window)) % rplan.n_samples
+    window = table.values.reshape(94 * 94, table.n_window)
+    assert np.abs(window - profiles[:, columns]).max() < 1e-5 * np.abs(profiles).max()
+    assert path_bounds_m(ANTENNAS.tx_m, ANTENNAS.rx_m, np.array([[0.0, 0.0, 0.3]]))[0] > 0.6
+
+
+# ---- the coarse-to-fine condition -------------------------------------------------------------------------------
+
+
+def _gaussian_profiles(centres_m: np.ndarray, amplitudes: np.ndarray, width_m: float):
+    """evaluate(points) = sum_i a_i exp(-(z - c_i)^2 / (2 w^2)) per pixel (pixel index in x): profiles whose fall
+    from a peak is known, loss(d) = 20 log10(e) d^2 / (2 w^2) dB."""
+    def evaluate(points_m: np.ndarray) -> np.ndarray:
+        pixel = np.rint(points_m[:, 0]).astype(int)
+        z = points_m[:, 2][:, None]
+        return (amplitudes[pixel] * np.exp(-((z - centres_m[pixel]) ** 2) / (2 * width_m ** 2))).sum(axis=1)
+    return evaluate
+
+
+@pytest.mark.parametrize("step", [2, 4, 7])
+def test_coarse_to_fine_finds_the_full_grids_peak_when_the_candidate_window_covers_the_loss(step, record_property):
+    # Condition (methods.skips.bp_search): a profile falls from any peak by at most loss(d) dB at distance d; then with
+    # windows >= loss(half a level's spacing) + loss(dz / 2) the search returns the full grid's argmax. For positive
+    # sums of equal-width Gaussians loss(d) = 20 log10(e) d^2 / (2 w^2) holds (Jensen at the stationary point).
+    rng = fresh_rng(record_property)
+    n_px, width_m, dz_m = 400, 0.004, 0.001
+    z_m = np.arange(0.25, 0.35 + 1e-9, dz_m)
+    centres = rng.uniform(0.25, 0.35, (n_px, 3))
+    amplitudes = rng.uniform(0.2, 1.0, (n_px, 3))
+    evaluate = _gaussian_profiles(centres, amplitudes, width_m)
+    x = np.arange(n_px, dtype=float)
+
+    def loss_db(d_m):
+        return 20 * np.log10(np.e) * d_m ** 2 / (2 * width_m ** 2)
+    full = search_depth(evaluate, x, x * 0, z_m, SearchPlan.every_sample(n_px), threshold_db=6.0)
+    curve = loss_db(np.arange(1, step + 1) * dz_m / 2)                     # loss at half of each level's spacing
+    plan = SearchPlan.uniform(n_px, step, curve, margin_db=loss_db(dz_m / 2))
+    fast = search_depth(evaluate, x, x * 0, z_m, plan, threshold_db=6.0)
+    full_m, fast_m = (filter_depth(r.depth_m, r.max_projection, 6.0) for r in (full, fast))   # as methods.bp does
+    same(np.isfinite(full_m), np.isfinite(fast_m))
+    kept = np.isfinite(full_m)
+    np.testing.assert_allclose(fast_m[kept], full_m[kept], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fast.max_projection[kept], full.max_projection[kept], rtol=0, atol=0)
+    assert fast.n_evaluated < full.n_evaluated
+
+
+def test_coarse_to_fine_misses_a_peak_when_the_condition_fails():
+    # a narrow tall peak (w = 1 mm) between two coarse samples of step 8 mm beside a broad lower one (w = 2 cm):
+    # the narrow one falls by 69 dB at 4 mm, so a 0 dB candidate window keeps only the broad peak's samples
+    z_m = np.arange(0.25, 0.35 + 1e-9, 0.001)
+
+    def evaluate(points_m):
+        z = points_m[:, 2]
+        return np.exp(-((z - 0.254) ** 2) / (2 * 0.001 ** 2)) + 0.8 * np.exp(-((z - 0.298) ** 2) / (2 * 0.02 ** 2))
+    x = np.zeros(1)
+    full = search_depth(evaluate, x, x, z_m, SearchPlan.every_sample(1), threshold_db=None)
+    miss = search_depth(evaluate, x, x, z_m, SearchPlan.uniform(1, 8, np.zeros(8)), None)
+    found = search_depth(evaluate, x, x, z_m, SearchPlan.uniform(1, 8, np.full(8, 75.0)), None)
+    assert full.depth_m[0] == pytest.approx(0.254, abs=1e-4)
+    assert miss.depth_m[0] == pytest.approx(0.298, abs=1e-3)
+    assert found.depth_m[0] == full.depth_m[0]
+
+
+# ---- physics with every skip on ---------------------------------------------------------------------------------
+
+
+def test_point_targets_reconstruct_where_they_are_with_every_skip(scene):
+    for config in ("d05", "d10"):
+        rec = reconstruct(scene, "bp", config, roi="all")
+        none = reconstruct(scene, "bp", config, roi="none")
+        same(np.isfinite(rec.depth_m), np.isfinite(none.depth_m))
+        np.testing.assert_allclose(rec.depth_m[rec.valid], none.depth_m[none.valid], atol=1e-7)
+        row, col = np.unravel_index(np.nanargmax(rec.magnitude), GRID.image_shape)
+        assert (GRID.x_m[col], GRID.y_m[::-1][row]) == pytest.approx((0.004, -0.006), abs=1.1e-3)
+        assert rec.depth_m[row, col] == pytest.approx(0.300, abs=0.5e-3)
+        assert rec.extra["evaluated_voxels"] < none.extra["evaluated_voxels"]
+
+
+def test_bp_max_point_target_with_range_compression_and_search():
+    target_m = np.array([0.004, 0.002, 0.311])
+    grid = RadarGrid((-0.004, -0.006, 0.28), (0.012, 0.010, 0.34), (9, 9, 61))
+    capture = make_capture(simulate(target_m[None], np.ones(1), MAROON_FREQS_HZ), MAROON_FREQS_HZ, grid)
+    rec = reconstruct(capture, "bp", "full", roi="all")
+    assert rec.extra["range_cpu"]
+    row, col = np.unravel_index(np.nanargmax(rec.magnitude), grid.image_shape)
+    assert (row, col) == (4, 4)
+    assert rec.depth_m[row, col] == pytest.approx(target_m[2], abs=0.2e-3)
+
+
+# ---- the region of interest -------------------------------------------------------------------------------------
+
+
+def test_mask_bb_roi_is_inclusive_and_ignores_absent_bounds():
+    roi = roi_from_mask_bb({"xmin": -0.01, "ymax": 0.0, "zmin": 0.3}, GRID)
+    x_m, y_m = GRID.pixel_xy_m()
+    same(roi.pixels, (x_m >= -0.01) & (y_m <= 0.0))
+    assert roi.pixels[GRID.image_shape[0] // 2, 5]              # x = -0.01 exactly: inside (inclusive)
+    assert (roi.z_min_m, roi.z_max_m) == (0.3, np.inf)
+    assert full_roi(GRID).is_full(GRID) and not roi.is_full(GRID)
+
+
+def test_mask_bb_limits_every_method(scene):
+    capture = dataclasses.replace(scene, metadata=dataclasses.replace(
+        scene.metadata, mask_bb_m={"xmax": 0.0, "zmin": 0.295, "zmax": 0.34}))
+    x_m, _ = GRID.pixel_xy_m()
+    settings = dataclasses.replace(NONE, mask_bb=True, mask_bb_depth=True)
+    for method, config in (("bp", "d10"), ("2fsk", "d05"), ("3fsk", "d05_d10")):
+        rec = reconstruct(capture, method, config, roi=settings)
+        assert not np.isfinite(rec.depth_m[x_m > 0]).any()
+        assert np.nanmin(rec.depth_m) >= 0.295 and np.nanmax(rec.depth_m) <= 0.34
+        assert rec.extra["roi_px"] == int((x_m <= 0).sum())
+
+
+# ---- agreement on a small synthetic capture ---------------------------------------------------------------------
+
+
+def agreement(a, b) -> float:
+    both = a.valid & b.valid
+    return float(np.mean(np.abs(a.depth_m[both] - b.depth_m[both]) <= 1e-4))
+
+
+def test_skips_agree_with_the_full_computation_on_a_synthetic_capture(synth_capture):
+    from bench.maroon import reader
+    capture = reader.read_capture(synth_capture("03_sphere", 30, frequency_points=16), parts=("radar",))
+    for method, config in (("2fsk", "d05"), ("3fsk", "d05_d10")):
+        full = reconstruct(capture, method, config, roi="none")
+        fast = reconstruct(capture, method, config, roi=ALL.only("fsk_keep"))
+        assert agreement(full, fast) >= 0.99 and fast.valid.sum() == pytest.approx(full.valid.sum(), rel=0.01)
+        assert fast.extra["roi_px"] < 0.5 * full.valid.size
+    grid = RadarGrid((-0.06, -0.06, 0.24), (0.06, 0.06, 0.36), (61, 61, 61))          # 2 mm pixels and steps
+    for config in ("d05", None):
+        full = reconstruct(capture, "bp", config, grid=grid, roi="none")
+        fast = reconstruct(capture, "bp", config, grid=grid, roi="auto")
+        assert agreement(full, fast) >= 0.99 and fast.valid.sum() == pytest.approx(full.valid.sum(), rel=0.01)
+        assert fast.extra["evaluated_voxels"] < full.extra["evaluated_voxels"]
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_coarse_roi_without_the_search_is_the_box_volume_on_warp_devices(device):
+    """Warp devices evaluate every depth of the coarse ROI as the dense volume over its bounding box (bp._box_depth_m):
+    the same depths as the CPU's every-sample search of the same ROI (Warp-CPU's float32 kernel within 1e-5 m;
+    CUDA's tensor-core kernel, fp16 operands, within the agreement rule's 0.1 mm: measured 4e-5 m)."""
+    freqs_hz = MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, "d05")]
+    points_m = plate_points_m(0.31, half_size_m=0.02)
+    seed = int(np.random.default_rng().integers(1000))
+    signal = add_noise(simulate(points_m, np.ones(len(points_m)), freqs_hz), 20, seed=seed)
+    capture = make_capture(signal, freqs_hz, RadarGrid((-0.04, -0.04, 0.26), (0.04, 0.04, 0.36), (21, 21, 51)))
+    settings = SkipSettings(mask_bb=True, coarse_roi=True)
+    cpu = reconstruct(capture, "bp", None, device="cpu", roi=settings)
+    box = reconstruct(capture, "bp", None, device=device, roi=settings)
+    assert np.array_equal(np.isfinite(cpu.depth_m), np.isfinite(box.depth_m)) and np.isfinite(box.depth_m).any()
+    assert np.nanmax(np.abs(cpu.depth_m - box.depth_m)) < (1e-4 if device == "cuda" else 1e-5)
