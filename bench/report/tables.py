@@ -24,10 +24,10 @@ import numpy as np
 import pandas as pd
 
 from bench import cli
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.frequencies import CONFIGS_GHZ, max_unambiguous_depth_m, select_frequencies
 from methods.registry import BUILTIN, label_of
 
-MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 RESULTS_DIR = Path(__file__).resolve().parents[2] / "results"
 METRICS_CM = ["C_g_cm", "C_s_cm", "P_cm", "P_e_cm"]
 GROUP_COLUMNS = ["method", "freq", "prior", "grid"]

@@ -13,9 +13,9 @@ from bench.maroon.antennas import load_antenna_array
 from bench.synth import simulate_frame
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.frequencies import config_indices, max_unambiguous_depth_m
 
-MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 TABLE1_CONFIGS = ("d05", "d1", "d2", "d4", "d8", "d10")
 THREE_FREQ_CONFIGS = ("d05_d10", "d1_d10", "d2_d10")
 PLATE_HALF_SIZE_M = 0.03

@@ -11,10 +11,10 @@ import numpy as np
 from bench.maroon.antennas import load_antenna_array
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import CameraIntrinsics, Capture, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.correlate import C_M_PER_S
 
 ANTENNAS = load_antenna_array()
-MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 TABLE1_FREQS_HZ = MAROON_FREQS_HZ[[0, 25, 75, 101, 114, 120, 127]]   # every frequency of Table I and 3FSK
 
 
