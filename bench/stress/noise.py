@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.stress.scenes import antennas, config_freqs_hz, frame, noise_power, pixel_grid, plate_points_m
+from bench.stress.scenes import antennas, config_freqs_hz, frame, noise_power, pixel_grid
+from bench.synth.memory import plate_points_m
 from bench.synth.radar_model import noise_frame
 from methods.backends import correlate
 from methods.mm2fsk import reconstruct_mm2fsk
