@@ -19,14 +19,13 @@ the centre's path (the Fermat path length is stationary, so the phase error is s
 from __future__ import annotations
 
 import dataclasses
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
+from bench.synth.leg_sum import leg_sum
 from bench.synth.meshes import indexed
-from bench.synth.radar_model import CHUNK_POINTS, PARTIAL_SUMS, RESEED_STEPS, exact_phasors
+from bench.synth.radar_model import leg_distances
 from bench.synth.sampling import SurfaceSamples
 
 LOBE_CUTOFF = 1e-2      # as radar_scene.LOBE_CUTOFF
@@ -96,55 +95,44 @@ def _audible(pairs: BouncePairs, antennas_m: np.ndarray) -> BouncePairs:
 
 
 def _legs(points_m: np.ndarray, antennas_m: np.ndarray, element_exponent: float) -> tuple[np.ndarray, np.ndarray]:
-    """Distances (K, E) m and element-pattern gains (K, E) of the legs point -> antenna."""
-    to_antenna = antennas_m[None] - points_m[:, None, :]
-    distance = np.linalg.norm(to_antenna, axis=2)
-    gain = np.clip(-to_antenna[..., 2] / distance, 0.0, 1.0) ** element_exponent if element_exponent else 1.0
-    return distance, gain * np.ones_like(distance)
+    """Distances (E, K) m and element-pattern gains (E, K) of the legs point -> antenna."""
+    distance = leg_distances(points_m, antennas_m)
+    if not element_exponent:
+        return distance, np.ones_like(distance)
+    return distance, np.clip((points_m[:, 2] - antennas_m[:, 2:]) / distance, 0.0, 1.0) ** element_exponent
+
+
+def _first_leg(pairs: BouncePairs, rows: np.ndarray, antennas_m: np.ndarray, element_exponent: float):
+    """Path (E, k) m and weight (E, k) complex64 of the leg antenna -> p1 -> p2 (the hop rides on p1's leg)."""
+    distance, element = _legs(pairs.first_m[rows], antennas_m, element_exponent)
+    return distance + pairs.hop_m[rows], (element / distance).astype(np.complex64)
+
+
+def _second_leg(pairs: BouncePairs, rows: np.ndarray, antennas_m: np.ndarray, element_exponent: float):
+    """Path (E, k) m and weight (E, k) complex64 of the leg p2 -> antenna: the second surface's lobe around the
+    doubly reflected ray and the pair's amplitude."""
+    second, outgoing = pairs.second_m[rows], pairs.outgoing[rows]
+    distance, element = _legs(second, antennas_m, element_exponent)
+    cos_lobe = (antennas_m @ outgoing.T - np.einsum("kc,kc->k", second, outgoing)) / distance
+    lobe = np.exp(-0.5 * (np.arccos(np.clip(cos_lobe, -1.0, 1.0)) / pairs.lobe_rad[rows]) ** 2)
+    return distance, (element * lobe / distance * pairs.amplitude[rows]).astype(np.complex64)
 
 
 def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs_hz: np.ndarray,
                    element_exponent: float = 0.0) -> np.ndarray:
-    """The double-bounce echo of `pairs`, both directions, complex64 (n_rx, n_tx, F) in the direct echo's units
-    (blocks of pairs on two threads with single-threaded BLAS, as radar_model.simulate_frame)."""
+    """The double-bounce echo of `pairs`, both directions, complex64 (n_rx, n_tx, F) in the direct echo's units.
+
+    Rows 0..K-1 are the forward paths (tx -> p1 -> p2 -> rx), rows K..2K-1 the reverse ones (bench.synth.leg_sum).
+    """
     tx_m, rx_m = np.asarray(tx_m, float), np.asarray(rx_m, float)
-    outs = [np.zeros((len(freqs_hz), len(rx_m), len(tx_m)), dtype=np.complex64) for _ in range(PARTIAL_SUMS)]
-    starts = range(0, len(pairs.hop_m), CHUNK_POINTS)
+    n_pairs = len(pairs.hop_m)
 
-    def accumulate(k: int) -> None:
-        for start in starts[k::PARTIAL_SUMS]:
-            _accumulate_pairs(outs[k], pairs, slice(start, start + CHUNK_POINTS), tx_m, rx_m, freqs_hz,
-                              element_exponent)
+    def legs(rows: np.ndarray):
+        forward, reverse = rows[rows < n_pairs], rows[rows >= n_pairs] - n_pairs
+        rx = [_second_leg(pairs, forward, rx_m, element_exponent), _first_leg(pairs, reverse, rx_m, element_exponent)]
+        tx = [_first_leg(pairs, forward, tx_m, element_exponent), _second_leg(pairs, reverse, tx_m, element_exponent)]
+        return tuple(np.concatenate([a[i], b[i]], axis=1) for a, b in (rx, tx) for i in (0, 1))
 
-    with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(PARTIAL_SUMS) as pool:
-        list(pool.map(accumulate, range(PARTIAL_SUMS)))
-    return np.ascontiguousarray(sum(outs[1:], outs[0]).transpose(1, 2, 0))
-
-
-def _accumulate_pairs(out: np.ndarray, pairs: BouncePairs, block: slice, tx_m: np.ndarray, rx_m: np.ndarray,
-                      freqs_hz: np.ndarray, element_exponent: float) -> None:
-    """Add a block of pairs to out[f, rx, tx]: forward (tx -> p1 -> p2 -> rx) and reverse paths."""
-    first, second, hop = pairs.first_m[block], pairs.second_m[block], pairs.hop_m[block]
-    legs = {}
-    for name, antennas_m in (("rx", rx_m), ("tx", tx_m)):
-        dist1, element1 = _legs(first, antennas_m, element_exponent)
-        dist2, element2 = _legs(second, antennas_m, element_exponent)
-        cos_lobe = np.einsum("kec,kc->ke", antennas_m[None] - second[:, None, :], pairs.outgoing[block]) / dist2
-        lobe = np.exp(-0.5 * (np.arccos(np.clip(cos_lobe, -1.0, 1.0)) / pairs.lobe_rad[block, None]) ** 2)
-        legs[name] = ((dist1 + hop[:, None], (element1 / dist1).astype(np.complex64)),     # the hop rides on p1's leg
-                      (dist2, (element2 * lobe / dist2 * pairs.amplitude[block, None]).astype(np.complex64)))
-    steps_hz = np.diff(freqs_hz)
-    equidistant = len(steps_hz) > 0 and np.allclose(steps_hz, steps_hz[0], rtol=1e-9, atol=1e-3)
-    reseed = RESEED_STEPS if equidistant else 1
-    phasors = [[None, None], [None, None]]             # [rx, tx] x [p1, p2]
-    steps = [[exact_phasors(path, steps_hz[0]) if equidistant else None for path, _ in legs[name]]
-             for name in ("rx", "tx")]
-    for n, freq_hz in enumerate(freqs_hz):
-        for a, name in enumerate(("rx", "tx")):
-            for b, (path, weight) in enumerate(legs[name]):
-                if n % reseed == 0:
-                    phasors[a][b] = exact_phasors(path, freq_hz) * weight
-                else:
-                    phasors[a][b] *= steps[a][b]
-        (rx1, rx2), (tx1, tx2) = phasors
-        out[n] += rx2.T @ tx1 + rx1.T @ tx2
+    # a row is placed by its receive-leg and transmit-leg points, so that a block's legs span little
+    positions = np.block([[pairs.second_m, pairs.first_m], [pairs.first_m, pairs.second_m]])
+    return leg_sum(legs, positions, len(rx_m), len(tx_m), freqs_hz)

@@ -3,67 +3,68 @@
     s[rx, tx, f] = sum_k a_k exp(-j 2 pi f (|p_k - tx| + |p_k - rx|) / c) / (|p_k - tx| |p_k - rx|)
 
 Per frequency the sum is a matrix product S_f = (A_f * a)^T B_f with A_f[k, rx] = exp(-j k_f |p_k - rx|) / |p_k - rx|
-and B_f[k, tx] likewise. Phases are formed in float64 and reduced modulo one cycle; for equidistant frequencies the
-phasors advance by one complex64 multiply per step and are re-formed exactly every `RESEED_STEPS` frequencies.
+and B_f[k, tx] likewise, computed on spatially compact blocks of scatterers at a few node frequencies and
+interpolated to all (bench.synth.leg_sum, bench.synth.frequency_nodes).
 """
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from bench.synth.config import C_M_PER_S, SynthConfig
+from bench.synth.leg_sum import leg_sum
 from bench.synth.sampling import SurfaceSamples
-
-RESEED_STEPS = 16       # exact phasors every 16 frequencies bound the complex64 recursion error to ~1e-6
-CHUNK_POINTS = 4096     # scatterers per block (bounds memory to ~100 MB per thread)
-PARTIAL_SUMS = 2        # blocks alternate between two sums, one thread each: fixed, so results do not depend on
-                        # the machine (the order of float32 additions is always the same)
-
-
-def exact_phasors(path_m: np.ndarray, freq_hz: float) -> np.ndarray:
-    """exp(-j 2 pi f path / c) as complex64: phase reduced modulo one cycle in float64, then float32 cos/sin."""
-    cycles = path_m * (freq_hz / C_M_PER_S)
-    cycles -= np.rint(cycles)
-    angle = (cycles * (-2.0 * np.pi)).astype(np.float32)
-    parts = np.empty(angle.shape + (2,), dtype=np.float32)
-    np.cos(angle, out=parts[..., 0])
-    np.sin(angle, out=parts[..., 1])
-    return parts.view(np.complex64)[..., 0]
 
 
 def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarray, rx_m: np.ndarray,
                    freqs_hz: np.ndarray, normals: np.ndarray | None = None, lobe_rad: np.ndarray | None = None,
-                   element_exponent: float = 0.0) -> np.ndarray:
+                   element_exponent: float = 0.0, min_lobe_gain: float = 0.0) -> np.ndarray:
     """Frame of point scatterers: complex64 (n_rx, n_tx, F) indexed [rx, tx, f].
 
     points_m (K, 3) radar space, amplitudes (K,) complex (reflectivity, without path loss), tx_m (n_tx, 3),
     rx_m (n_rx, 3), freqs_hz (F,). Path loss 1 / (|p - tx| |p - rx|) is applied here, and per leg (scatterer to
     one antenna) the optional gains of `leg_gains`: the quasi-specular lobe (normals (K, 3), lobe_rad (K,)) and the
-    element pattern cos(theta)^element_exponent.
+    element pattern cos(theta)^element_exponent. Scatterers whose lobe gain towards every antenna is below
+    `min_lobe_gain` are skipped.
     """
     points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     amplitudes = np.asarray(amplitudes, dtype=np.complex128).reshape(-1)
     tx_m, rx_m = np.asarray(tx_m, dtype=np.float64), np.asarray(rx_m, dtype=np.float64)
-    freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
-    outs = [np.zeros((len(freqs_hz), len(rx_m), len(tx_m)), dtype=np.complex64) for _ in range(PARTIAL_SUMS)]
-    starts = range(0, len(points_m), CHUNK_POINTS)
+    antennas_m = np.concatenate([rx_m, tx_m])
+    n_rx = len(rx_m)
+    if normals is not None and min_lobe_gain > 0:
+        # lobe gain exp(-theta^2 / (2 lobe^2)) >= min_lobe_gain  <=>  cos(theta) >= cos(lobe sqrt(2 ln(1 / min)))
+        limit_rad = np.asarray(lobe_rad) * np.sqrt(2.0 * np.log(1.0 / min_lobe_gain))
+        cos_limit = np.where(limit_rad < np.pi, np.cos(np.minimum(limit_rad, np.pi)), -np.inf)
 
-    def accumulate(k: int) -> None:
-        for start in starts[k::PARTIAL_SUMS]:
-            chunk = slice(start, start + CHUNK_POINTS)
-            lobe = None if normals is None else (normals[chunk], lobe_rad[chunk])
-            _accumulate(outs[k], points_m[chunk], amplitudes[chunk], rx_m, tx_m, freqs_hz, lobe, element_exponent)
+    def legs(rows: np.ndarray):
+        points = points_m[rows]
+        dist_m = leg_distances(points, antennas_m)                               # (n_rx + n_tx, k)
+        gain = None
+        if normals is not None:        # leg_gains' lobe, from dot products (antenna-major layout)
+            facet = normals[rows]
+            cos_leg = (antennas_m @ facet.T - np.einsum("kc,kc->k", points, facet)) / dist_m
+            if min_lobe_gain > 0:
+                audible = cos_leg.max(axis=0) >= cos_limit[rows]
+                rows, points, dist_m, cos_leg = rows[audible], points[audible], dist_m[:, audible], cos_leg[:, audible]
+            gain = np.exp(-0.5 * (np.arccos(np.clip(cos_leg, -1.0, 1.0)) / lobe_rad[rows]) ** 2)
+        if element_exponent:           # leg_gains' element pattern
+            element = np.clip((points[:, 2] - antennas_m[:, 2:]) / dist_m, 0.0, 1.0) ** element_exponent
+            gain = element if gain is None else gain * element
+        weight = (1.0 / dist_m).astype(np.complex64)
+        if gain is not None:
+            weight *= gain.astype(np.float32)
+        weight[:n_rx] *= amplitudes[rows].astype(np.complex64)
+        return dist_m[:n_rx], weight[:n_rx], dist_m[n_rx:], weight[n_rx:]
 
-    # numpy's OpenBLAS workers busy-wait: on shared cores these many small (96 x K) @ (K x 96) products run
-    # 2-6x faster single-threaded (measured); two Python threads (numpy releases the GIL) use both cores instead
-    with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(PARTIAL_SUMS) as pool:
-        list(pool.map(accumulate, range(PARTIAL_SUMS)))
-    out = outs[0]
-    for other in outs[1:]:
-        out += other
-    return np.ascontiguousarray(out.transpose(1, 2, 0))
+    return leg_sum(legs, points_m, n_rx, len(tx_m), freqs_hz)
+
+
+def leg_distances(points_m: np.ndarray, antennas_m: np.ndarray) -> np.ndarray:
+    """|p_k - a_e| (E, K) m as sqrt(|a|^2 + |p|^2 - 2 a.p): a matrix product; in float64 the cancellation costs
+    ~1e-16 m at these ranges (a phase error ~1e-13 rad)."""
+    squared = (np.einsum("ec,ec->e", antennas_m, antennas_m)[:, None] + np.einsum("kc,kc->k", points_m, points_m)
+               - 2.0 * (antennas_m @ points_m.T))
+    return np.sqrt(np.maximum(squared, 0.0))
 
 
 def leg_gains(points_m: np.ndarray, antennas_m: np.ndarray, normals: np.ndarray | None = None,
@@ -86,30 +87,6 @@ def leg_gains(points_m: np.ndarray, antennas_m: np.ndarray, normals: np.ndarray 
     if element_exponent:
         gain *= np.clip(-to_antenna[..., 2] / distance, 0.0, 1.0) ** element_exponent
     return gain
-
-
-def _accumulate(out: np.ndarray, points_m: np.ndarray, amplitudes: np.ndarray, rx_m: np.ndarray, tx_m: np.ndarray,
-                freqs_hz: np.ndarray, lobe=None, element_exponent: float = 0.0) -> None:
-    """Add the contributions of a block of scatterers to out[f, rx, tx]."""
-    n_rx = len(rx_m)
-    steps_hz = np.diff(freqs_hz)
-    equidistant = len(steps_hz) > 0 and np.allclose(steps_hz, steps_hz[0], rtol=1e-9, atol=1e-3)
-    reseed = RESEED_STEPS if equidistant else 1
-    antennas_m = np.concatenate([rx_m, tx_m])
-    dist_m = np.linalg.norm(points_m[:, None, :] - antennas_m[None], axis=2)  # (k, n_rx + n_tx)
-    weight = (1.0 / dist_m).astype(np.complex64)
-    if lobe is not None or element_exponent:
-        normals, lobe_rad = lobe if lobe is not None else (None, None)
-        weight *= leg_gains(points_m, antennas_m, normals, lobe_rad, element_exponent).astype(np.float32)
-    weight[:, :n_rx] *= amplitudes[:, None].astype(np.complex64)
-    step = exact_phasors(dist_m, steps_hz[0]) if equidistant else None
-    for n, freq_hz in enumerate(freqs_hz):
-        if n % reseed == 0:
-            phasor = exact_phasors(dist_m, freq_hz)
-            phasor *= weight
-        else:
-            phasor *= step
-        out[n] += phasor[:, :n_rx].T @ phasor[:, n_rx:]             # columns: A = rx part, B = tx part
 
 
 def surface_amplitudes(samples: SurfaceSamples, reflectivity: np.ndarray, config: SynthConfig,

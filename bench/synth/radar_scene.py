@@ -17,7 +17,6 @@ from bench.synth.materials import MATERIALS
 from bench.synth.radar_model import (
     channel_gains,
     clutter_frame,
-    leg_gains,
     material_amplitudes,
     noise_frame,
     roughen,
@@ -38,28 +37,15 @@ def _ideal_object(scene: Scene, config: SynthConfig, antennas, freqs, rng) -> np
     return simulate_frame(roughen(samples, config, rng), amplitudes, antennas.tx_m, antennas.rx_m, freqs)
 
 
-LOBE_CUTOFF = 1e-2   # samples whose lobe gain towards every antenna is below this reach no pair above 1e-4
-
-
-def _audible(samples: SurfaceSamples, lobe_rad: np.ndarray, antennas_m: np.ndarray) -> np.ndarray:
-    """Mask of the samples whose quasi-specular lobe gain towards some antenna is at least LOBE_CUTOFF: the others
-    (a shell's flanks facing sideways) add at most 1e-4 of a facing sample's amplitude per pair and are skipped."""
-    keep = np.empty(len(samples.areas_m2), dtype=bool)
-    for start in range(0, len(keep), 4096):
-        block = slice(start, start + 4096)
-        gain = leg_gains(samples.points_m[block], antennas_m, samples.normals[block], lobe_rad[samples.part[block]])
-        keep[block] = gain.max(axis=1) >= LOBE_CUTOFF
-    return keep
+LOBE_CUTOFF = 1e-2   # samples whose lobe gain towards every antenna is below this reach no pair above 1e-4: skipped
+                     # (a shell's flanks facing sideways)
 
 
 def _simulate(samples: SurfaceSamples, amplitudes: np.ndarray, points_m: np.ndarray, lobe_rad: np.ndarray | None,
               config: SynthConfig, antennas, freqs) -> np.ndarray:
-    if lobe_rad is None:
-        return simulate_frame(points_m, amplitudes, antennas.tx_m, antennas.rx_m, freqs, None, None,
-                              config.element_exponent)
-    keep = _audible(samples, lobe_rad, np.concatenate([antennas.rx_m, antennas.tx_m]))
-    return simulate_frame(points_m[keep], amplitudes[keep], antennas.tx_m, antennas.rx_m, freqs,
-                          samples.normals[keep], lobe_rad[samples.part[keep]], config.element_exponent)
+    lobes = None if lobe_rad is None else lobe_rad[samples.part]
+    return simulate_frame(points_m, amplitudes, antennas.tx_m, antennas.rx_m, freqs,
+                          None if lobe_rad is None else samples.normals, lobes, config.element_exponent, LOBE_CUTOFF)
 
 
 def object_frame(scene: Scene, config: SynthConfig, antennas, freqs, rng) -> np.ndarray:
