@@ -16,6 +16,7 @@ COMMANDS = {
     "skips": ("skips", "every skip off and on per catalogue object (CPU)"),
     "skips-gpu": ("skips_gpu", "the skips on fresh frames on a Warp device"),
     "skips-reference": ("skips_reference", "the public reference kernels' full computation for the skips"),
+    "synth": ("synth", "synthetic capture generation by stage, radar echo from frequency nodes and direct"),
 }
 
 

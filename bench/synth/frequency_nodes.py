@@ -7,10 +7,12 @@ fits one matrix L (F x M) such that, for every |dp| <= W,
 
     | exp(-j 2 pi f_n dp / c) - sum_m L[n, m] exp(-j 2 pi g_m dp / c) | <= NODE_ERROR      (f_n targets, g_m nodes)
 
-(regularised least squares on a fine grid of dp; the bound is checked on a 5x finer grid). By linearity
+(regularised least squares on a fine grid of dp; the bound is checked on a 5x finer grid, with L rounded to
+complex64 as it is used). By linearity
 |u(f_n) - sum_m L[n, m] u(g_m)| <= NODE_ERROR sum_k |a_k|: a bound per unit of scatterer weight, about the rounding
 of the complex64 sums themselves. The row sums of |L| are kept <= NODE_GAIN, which bounds how much the nodes' own
-complex64 rounding is amplified. Where no M <= F / 2 meets both, the nodes are the frequencies themselves (exact).
+complex64 rounding is amplified. Where no M <= MAX_NODE_SHARE F meets both, the nodes are the frequencies themselves
+(every frequency computed directly).
 """
 from __future__ import annotations
 
@@ -20,8 +22,9 @@ import numpy as np
 
 from bench.synth.config import C_M_PER_S
 
-NODE_ERROR = 2e-7          # interpolation error per unit scatterer weight (complex64 sums round at ~1e-7)
+NODE_ERROR = 1e-6          # interpolation error per unit scatterer weight (complex64 sums round at ~1e-7 of it)
 NODE_GAIN = 6.0            # most that L's rows may amplify the nodes' rounding
+MAX_NODE_SHARE = 0.5       # at most this share of the frequencies as nodes: beyond it they save too little (0: direct)
 WIDTH_STEP_M = 2.5e-3      # half-widths are rounded up to a multiple of this, so that few fits are made (cached)
 _FIT_POINTS = 400          # samples of dp in [-W, W] for the fit (the functions fit hold < 10 cycles over it)
 _RIDGE = 1e-14             # Tikhonov weight relative to the normalised Gram matrix: keeps L small near the knee
@@ -34,12 +37,13 @@ def width_bin_m(half_width_m: float) -> float:
 
 def interpolator(freqs_hz: np.ndarray, half_width_m: float) -> tuple[np.ndarray, np.ndarray | None]:
     """(node frequencies (M,) Hz, L (F, M) complex64) for path offsets within +-half_width_m; L is None when the
-    nodes are the frequencies themselves (no M <= F / 2 meets NODE_ERROR and NODE_GAIN)."""
-    return _fit(tuple(np.asarray(freqs_hz, dtype=np.float64).tolist()), width_bin_m(half_width_m))
+    nodes are the frequencies themselves (no M <= MAX_NODE_SHARE F meets NODE_ERROR and NODE_GAIN)."""
+    freqs = tuple(np.asarray(freqs_hz, dtype=np.float64).tolist())
+    return _fit(freqs, width_bin_m(half_width_m), int(MAX_NODE_SHARE * len(freqs)))
 
 
 @functools.lru_cache(maxsize=128)
-def _fit(freqs_hz: tuple[float, ...], half_width_m: float) -> tuple[np.ndarray, np.ndarray | None]:
+def _fit(freqs_hz: tuple[float, ...], half_width_m: float, max_nodes: int) -> tuple[np.ndarray, np.ndarray | None]:
     freqs = np.asarray(freqs_hz)
     centre_hz = 0.5 * (freqs.min() + freqs.max())
     offsets_m = np.linspace(-half_width_m, half_width_m, _FIT_POINTS)
@@ -50,13 +54,13 @@ def _fit(freqs_hz: tuple[float, ...], half_width_m: float) -> tuple[np.ndarray, 
 
     target, target_check = phasors(freqs, offsets_m), phasors(freqs, check_m)
     nyquist = int(2.0 * half_width_m * (freqs.max() - freqs.min()) / C_M_PER_S)    # fewer nodes cannot fit
-    for n_nodes in range(max(2, nyquist), len(freqs) // 2 + 1):       # beyond F / 2 the nodes save too little
+    for n_nodes in range(max(2, nyquist), max_nodes + 1):
         nodes = np.linspace(freqs.min(), freqs.max(), n_nodes)
         basis = phasors(nodes, offsets_m)
         gram = basis @ basis.conj().T / len(offsets_m)
         rhs = target @ basis.conj().T / len(offsets_m)
-        fit = np.linalg.solve(gram.T + _RIDGE * np.eye(n_nodes), rhs.T).T
+        fit = np.linalg.solve(gram.T + _RIDGE * np.eye(n_nodes), rhs.T).T.astype(np.complex64)   # as it is used
         error = np.abs(fit @ phasors(nodes, check_m) - target_check).max()
         if error <= NODE_ERROR and np.abs(fit).sum(axis=1).max() <= NODE_GAIN:
-            return nodes, fit.astype(np.complex64)
+            return nodes, fit
     return freqs, None

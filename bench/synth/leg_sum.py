@@ -28,9 +28,9 @@ BLOCK_ROWS = 2048       # rows per block: small enough that a block spans a few 
 PARTIAL_SUMS = 2        # blocks alternate between two sums, one thread each: fixed, so results do not depend on
                         # the machine (the order of float32 additions is always the same)
 
-# legs(rows) -> (path_rx (n_rx, k) m, weight_rx (n_rx, k) complex64, path_tx (n_tx, k) m, weight_tx (n_tx, k)
-# complex64) for the given row indices, antenna-major; k may be smaller than len(rows) (rows adding nothing dropped)
-Legs = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+# legs(rows) -> (path (n_rx + n_tx, k) m float64, weight (n_rx + n_tx, k) complex64) for the given row indices,
+# antenna-major, receive legs first; k may be smaller than len(rows) (rows that add nothing dropped)
+Legs = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 def exact_phasors(path_m: np.ndarray, freq_hz) -> np.ndarray:
@@ -81,20 +81,20 @@ def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: n
     return np.ascontiguousarray(out.transpose(1, 2, 0))
 
 
-def add_block(out: np.ndarray, path_rx: np.ndarray, weight_rx: np.ndarray, path_tx: np.ndarray,
-              weight_tx: np.ndarray, freqs_hz: np.ndarray) -> None:
-    """Add one block's sum to out[f, rx, tx]: at the node frequencies, then interpolated to every frequency."""
-    if path_rx.shape[1] == 0:
+def add_block(out: np.ndarray, path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray) -> None:
+    """Add one block's sum to out[f, rx, tx] (path_m, weight: (n_rx + n_tx, k), receive legs first): at the node
+    frequencies, then interpolated to every frequency."""
+    if path_m.shape[1] == 0:
         return
-    n_rx = len(path_rx)
-    low_rx, high_rx, low_tx, high_tx = path_rx.min(1), path_rx.max(1), path_tx.min(1), path_tx.max(1)
-    centre_rx, centre_tx = 0.5 * (low_rx + high_rx), 0.5 * (low_tx + high_tx)
+    n_rx = out.shape[1]
+    low, high = path_m.min(axis=1), path_m.max(axis=1)
+    centre = 0.5 * (low + high)
     # every pair's path lies within centre_rx + centre_tx +- (largest receive half-span + largest transmit one)
-    nodes_hz, fit = interpolator(freqs_hz, 0.5 * (np.max(high_rx - low_rx) + np.max(high_tx - low_tx)))
+    half_span = 0.5 * (high - low)
+    nodes_hz, fit = interpolator(freqs_hz, half_span[:n_rx].max() + half_span[n_rx:].max())
     if fit is None:                 # direct: every frequency is a node, nothing to factor out
-        centre_rx, centre_tx = np.zeros_like(centre_rx), np.zeros_like(centre_tx)
-    offsets_m = np.concatenate([path_rx - centre_rx[:, None], path_tx - centre_tx[:, None]])
-    weight = np.concatenate([weight_rx, weight_tx])
+        centre[:] = 0.0
+    offsets_m = path_m - centre[:, None]
     at_nodes = out if fit is None else np.empty((len(nodes_hz),) + out.shape[1:], dtype=np.complex64)
     steps_hz = np.diff(nodes_hz)
     equidistant = len(steps_hz) > 0 and np.allclose(steps_hz, steps_hz[0], rtol=1e-9, atol=1e-3)
@@ -114,6 +114,7 @@ def add_block(out: np.ndarray, path_rx: np.ndarray, weight_rx: np.ndarray, path_
     if fit is None:
         return
     every = (fit @ at_nodes.reshape(len(nodes_hz), -1)).reshape(out.shape)
-    every *= exact_phasors(centre_rx[None, :], freqs_hz[:, None])[:, :, None]    # the centre path, factored out
-    every *= exact_phasors(centre_tx[None, :], freqs_hz[:, None])[:, None, :]
+    centre_phasor = exact_phasors(centre[None, :], freqs_hz[:, None])          # the centre path, factored out
+    every *= centre_phasor[:, :n_rx, None]
+    every *= centre_phasor[:, None, n_rx:]
     out += every

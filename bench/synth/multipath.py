@@ -131,7 +131,8 @@ def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs
         forward, reverse = rows[rows < n_pairs], rows[rows >= n_pairs] - n_pairs
         rx = [_second_leg(pairs, forward, rx_m, element_exponent), _first_leg(pairs, reverse, rx_m, element_exponent)]
         tx = [_first_leg(pairs, forward, tx_m, element_exponent), _second_leg(pairs, reverse, tx_m, element_exponent)]
-        return tuple(np.concatenate([a[i], b[i]], axis=1) for a, b in (rx, tx) for i in (0, 1))
+        path_m, weight = (np.concatenate([np.concatenate([a[i], b[i]], axis=1) for a, b in (rx, tx)]) for i in (0, 1))
+        return path_m, weight
 
     # a row is placed by its receive-leg and transmit-leg points, so that a block's legs span little
     positions = np.block([[pairs.second_m, pairs.first_m], [pairs.first_m, pairs.second_m]])

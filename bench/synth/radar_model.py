@@ -39,22 +39,28 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
     def legs(rows: np.ndarray):
         points = points_m[rows]
         dist_m = leg_distances(points, antennas_m)                               # (n_rx + n_tx, k)
-        gain = None
-        if normals is not None:        # leg_gains' lobe, from dot products (antenna-major layout)
+        gain = None                    # leg_gains, from dot products; float32 (the weights are complex64)
+        if normals is not None:
             facet = normals[rows]
             cos_leg = (antennas_m @ facet.T - np.einsum("kc,kc->k", points, facet)) / dist_m
             if min_lobe_gain > 0:
                 audible = cos_leg.max(axis=0) >= cos_limit[rows]
                 rows, points, dist_m, cos_leg = rows[audible], points[audible], dist_m[:, audible], cos_leg[:, audible]
-            gain = np.exp(-0.5 * (np.arccos(np.clip(cos_leg, -1.0, 1.0)) / lobe_rad[rows]) ** 2)
-        if element_exponent:           # leg_gains' element pattern
-            element = np.clip((points[:, 2] - antennas_m[:, 2:]) / dist_m, 0.0, 1.0) ** element_exponent
+            angle = np.arccos(np.clip(cos_leg.astype(np.float32), -1.0, 1.0))
+            angle /= lobe_rad[rows].astype(np.float32)
+            angle *= angle
+            gain = np.exp(angle * np.float32(-0.5))
+        if element_exponent:
+            element = np.clip(((points[:, 2] - antennas_m[:, 2:]) / dist_m).astype(np.float32), 0.0, 1.0)
+            if element_exponent != 1:
+                element **= np.float32(element_exponent)
             gain = element if gain is None else gain * element
-        weight = (1.0 / dist_m).astype(np.complex64)
+        weight = np.reciprocal(dist_m, dtype=np.float32)
         if gain is not None:
-            weight *= gain.astype(np.float32)
+            weight *= gain
+        weight = weight.astype(np.complex64)
         weight[:n_rx] *= amplitudes[rows].astype(np.complex64)
-        return dist_m[:n_rx], weight[:n_rx], dist_m[n_rx:], weight[n_rx:]
+        return dist_m, weight
 
     return leg_sum(legs, points_m, n_rx, len(tx_m), freqs_hz)
 
