@@ -9,6 +9,10 @@ samples (ray casting), the radar echo (`simulate_frame`, multipath, wall), the d
 writing files; `other` is the rest (scene, noise, sums). With both paths, each capture's radar frames are compared
 (same seeds, so the same noise): the largest difference over the peak, and the rms difference against the
 thermal noise of the frames in dB. Writes OUT/perf_synth.csv (OUT: `--out`, default outputs/perf).
+
+`--workers N [N ...]` times instead what a user waits for: `generate_catalogue` of the objects at the distance into
+a fresh root, building N captures at once (default: as many as the generator builds, `capture_workers()`), wall and
+process CPU seconds: OUT/perf_synth_catalogue.csv.
 """
 from __future__ import annotations
 
@@ -109,6 +113,22 @@ def frame_difference(nodes_dir: Path, direct_dir: Path, config) -> dict:
             "rms_diff_over_noise_db": 20.0 * np.log10(rms / noise) if rms > 0 and noise > 0 else float("nan")}
 
 
+def catalogue(objects: list[str], distance_cm: int, config, workers: int, work: Path) -> dict:
+    """Wall and CPU seconds of generate_catalogue into a fresh root, `workers` captures at once."""
+    from bench.synth import generate
+
+    default = generate.capture_workers
+    generate.capture_workers = lambda: workers
+    try:
+        wall, cpu = time.perf_counter(), time.process_time()
+        generate.generate_catalogue(work / f"workers{workers}", [distance_cm], objects, config)
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    finally:
+        generate.capture_workers = default
+    print(f"generate_catalogue: {len(objects)} captures, {workers} at once: {wall:.1f} s wall, {cpu:.1f} s CPU")
+    return {"captures": len(objects), "workers": workers, "wall_s": wall, "cpu_s": cpu}
+
+
 def _print(rows: list[dict]) -> None:
     """Per capture its wall seconds and, below them, its process CPU seconds (all threads), in all and per stage."""
     stages = ["", *(f"{s}_" for s in STAGES)]
@@ -133,12 +153,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--distance", type=int, default=30, help="centimetres (default: %(default)s)")
     parser.add_argument("--preset", choices=list(PRESETS), default="realistic")
     parser.add_argument("--paths", nargs="+", choices=PATHS, default=list(PATHS), help="radar paths to time")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="folder for perf_synth.csv")
+    parser.add_argument("--workers", type=cli.positive_int, nargs="*", default=None,
+                        help="time generate_catalogue building this many captures at once (none given: the default)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="folder for the CSV")
     args = parser.parse_args(argv)
     unknown = [o for o in args.objects if o not in CATALOGUE]
     if unknown:
         parser.error(f"unknown object(s) {', '.join(unknown)}; known: {', '.join(CATALOGUE)}")
     config = preset(args.preset)
+    import open3d  # noqa: F401  - imported before timing (the generator's ray casting imports it on first use)
+
+    if args.workers is not None:
+        from bench.synth.generate import capture_workers
+
+        with tempfile.TemporaryDirectory(prefix="perf-synth-") as tmp:
+            rows = [catalogue(args.objects, args.distance, config, n, Path(tmp)) for n in args.workers or
+                    [capture_workers()]]
+        write_rows(rows, args.out / "perf_synth_catalogue.csv")
+        return 0
     rows = []
     with tempfile.TemporaryDirectory(prefix="perf-synth-") as tmp:
         work = Path(tmp)

@@ -13,9 +13,11 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +25,7 @@ import numpy as np
 
 from bench.synth import depth_camera, motion, ownership, photogrammetry, radar_scene, writer
 from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
+from bench.synth.leg_sum import PARTIAL_SUMS
 from bench.synth.meshes import rotation_matrix
 from bench.synth.scenes import CATALOGUE, build_scene
 
@@ -121,7 +124,13 @@ class _Manifest:
         except (OSError, ValueError):
             return {}
 
+    _lock = threading.Lock()        # captures built at once (generate_catalogue) record one after the other
+
     def record(self, key: str, entry: dict) -> None:
+        with self._lock:
+            self._record(key, entry)
+
+    def _record(self, key: str, entry: dict) -> None:
         captures = self.read()
         captures[key] = entry
         tmp = self.path.with_name(f".{MANIFEST_NAME}.{os.getpid()}.tmp")
@@ -208,18 +217,32 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
     """Ensure every (object, distance) capture; `objects=None` means the whole catalogue.
 
     Holds the root's lock throughout: a concurrent call waits (`on_wait()` is called once when it has to) and
-    then finds the captures cached. Raises ownership.ForeignRootError for a root with other data.
+    then finds the captures cached. Builds `capture_workers()` captures at once (threads; every capture draws from
+    its own seeded streams and sums in a fixed order, so its files do not depend on this); `log` sees them in order.
+    Raises ownership.ForeignRootError for a root with other data.
     """
     pairs = [(o, int(d)) for o in (list(objects) if objects is not None else list(CATALOGUE)) for d in distances]
     for object_name, distance_cm in pairs:
         _check(object_name, distance_cm, config)
     root = Path(root)
     ownership.claim(root)
-    results = []
-    with ownership.exclusive(root, on_wait):
-        for object_name, distance_cm in pairs:
-            result = _ensure_locked(root, object_name, distance_cm, config, force)
-            results.append(result)
-            if log is not None:
-                log(result)
-    return results
+    unique = list(dict.fromkeys(pairs))       # a capture asked for twice is built once
+    done: dict[tuple[str, int], CaptureResult] = {}
+    with ownership.exclusive(root, on_wait), ThreadPoolExecutor(min(capture_workers(), len(unique))) as pool:
+        futures = [pool.submit(_ensure_locked, root, o, d, config, force) for o, d in unique]
+        try:
+            for pair, future in zip(unique, futures, strict=True):
+                done[pair] = future.result()
+                if log is not None:
+                    log(done[pair])
+        except BaseException:
+            pool.shutdown(cancel_futures=True)
+            raise
+    return [done[pair] for pair in pairs]
+
+
+def capture_workers() -> int:
+    """Captures built at once: each one's radar sums take leg_sum.PARTIAL_SUMS threads; at least two, so that
+    one capture's single-threaded stages (ray casting, depth camera, files) overlap another's sums."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return max(2, cores // PARTIAL_SUMS)

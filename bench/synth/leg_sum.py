@@ -14,6 +14,8 @@ PARTIAL_SUMS sums, one thread each, added in a fixed order: results do not depen
 """
 from __future__ import annotations
 
+import contextlib
+import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
@@ -61,6 +63,32 @@ def compact_blocks(positions: np.ndarray, block_rows: int = BLOCK_ROWS) -> list[
     return blocks
 
 
+class _BlasLimit:
+    """BLAS held to one thread while any sum runs (counted: sums of several captures may overlap, and the process-wide
+    limit must not be lifted under one of them). numpy's OpenBLAS workers busy-wait: on shared cores these many
+    small (96 x K) @ (K x 96) products run 2-6x faster single-threaded (measured); Python threads use the cores."""
+
+    def __init__(self):
+        self._lock, self._users, self._limits = threading.Lock(), 0, None
+
+    @contextlib.contextmanager
+    def __call__(self):
+        with self._lock:
+            if self._users == 0:
+                self._limits = threadpool_limits(limits=1, user_api="blas")
+            self._users += 1
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._users -= 1
+                if self._users == 0:
+                    self._limits.restore_original_limits()
+
+
+single_threaded_blas = _BlasLimit()
+
+
 def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: np.ndarray) -> np.ndarray:
     """The frame (n_rx, n_tx, F) complex64 of all rows; `positions` (K, D) places the rows for blocking."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
@@ -71,9 +99,7 @@ def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: n
         for rows in blocks[k::PARTIAL_SUMS]:
             add_block(outs[k], *legs(rows), freqs_hz)
 
-    # numpy's OpenBLAS workers busy-wait: on shared cores these many small (96 x K) @ (K x 96) products run
-    # 2-6x faster single-threaded (measured); two Python threads (numpy releases the GIL) use both cores instead
-    with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(PARTIAL_SUMS) as pool:
+    with single_threaded_blas(), ThreadPoolExecutor(PARTIAL_SUMS) as pool:
         list(pool.map(accumulate, range(PARTIAL_SUMS)))
     out = outs[0]
     for other in outs[1:]:

@@ -62,6 +62,21 @@ def test_concurrent_processes_on_an_empty_root_generate_each_capture_once(tmp_pa
     assert sorted(manifest) == ["01_plate/30", "03_sphere/30"]
 
 
+def test_captures_built_at_once_are_the_files_built_one_at_a_time(tmp_path, monkeypatch):
+    """generate_catalogue builds several captures at once (threads): each capture's files are byte for byte those
+    of a run that builds one at a time, and the manifest records every capture."""
+    from bench.synth import generate
+
+    concurrent = generate_catalogue(tmp_path / "at_once", [30], OBJECTS, FAST)
+    monkeypatch.setattr(generate, "capture_workers", lambda: 1)
+    generate_catalogue(tmp_path / "one_by_one", [30], OBJECTS, FAST)
+    assert [r.status for r in concurrent] == ["generated"] * 2
+    files = _capture_files(tmp_path / "at_once")
+    assert len(files) > 10 and files == _capture_files(tmp_path / "one_by_one")
+    manifest = json.loads((tmp_path / "at_once" / "synth_manifest.json").read_text())["captures"]
+    assert sorted(manifest) == [f"{o}/30" for o in OBJECTS]
+
+
 def test_stale_temp_folder_of_a_dead_process_does_not_break_a_run(tmp_path):
     root = tmp_path / "synthetic"
     stale = root / "01_plate" / f".30.tmp-{_dead_pid()}-0123abcd"      # a first run that crashed mid-capture
