@@ -39,23 +39,29 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
     def legs(rows: np.ndarray):
         points = points_m[rows]
         dist_m = leg_distances(points, antennas_m)                               # (n_rx + n_tx, k)
-        gain = None                    # leg_gains, from dot products; float32 (the weights are complex64)
-        if normals is not None:
+        weight = np.reciprocal(dist_m, dtype=np.float32)   # path loss; the gains of leg_gains from dot products, all
+        if normals is not None:                             # in float32: the weights are complex64
             facet = normals[rows]
-            cos_leg = (antennas_m @ facet.T - np.einsum("kc,kc->k", points, facet)) / dist_m
+            cos_leg = (antennas_m @ facet.T - np.einsum("kc,kc->k", points, facet)).astype(np.float32)
+            cos_leg *= weight
             if min_lobe_gain > 0:
                 audible = cos_leg.max(axis=0) >= cos_limit[rows]
-                rows, points, dist_m, cos_leg = rows[audible], points[audible], dist_m[:, audible], cos_leg[:, audible]
-            angle = np.arccos(np.clip(cos_leg.astype(np.float32), -1.0, 1.0))
+                rows, points, dist_m = rows[audible], points[audible], dist_m[:, audible]
+                weight, cos_leg = weight[:, audible], cos_leg[:, audible]
+            angle = np.arccos(np.clip(cos_leg, -1.0, 1.0, out=cos_leg))
             angle /= lobe_rad[rows].astype(np.float32)
             angle *= angle
-            gain = np.exp(angle * np.float32(-0.5))
+            angle *= np.float32(-0.5)
+            gain = np.exp(angle)
+        else:
+            gain = None
         if element_exponent:
-            element = np.clip(((points[:, 2] - antennas_m[:, 2:]) / dist_m).astype(np.float32), 0.0, 1.0)
+            element = (points[:, 2] - antennas_m[:, 2:]).astype(np.float32)
+            element *= weight
+            np.clip(element, 0.0, 1.0, out=element)
             if element_exponent != 1:
                 element **= np.float32(element_exponent)
             gain = element if gain is None else gain * element
-        weight = np.reciprocal(dist_m, dtype=np.float32)
         if gain is not None:
             weight *= gain
         weight = weight.astype(np.complex64)
