@@ -93,7 +93,7 @@ def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: n
     """The frame (n_rx, n_tx, F) complex64 of all rows; `positions` (K, D) places the rows for blocking."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     outs = [np.zeros((len(freqs_hz), n_rx, n_tx), dtype=np.complex64) for _ in range(PARTIAL_SUMS)]
-    blocks = compact_blocks(np.asarray(positions, dtype=np.float64))
+    blocks = compact_blocks(np.asarray(positions, dtype=np.float64), BLOCK_ROWS)
 
     def accumulate(k: int) -> None:
         for rows in blocks[k::PARTIAL_SUMS]:
