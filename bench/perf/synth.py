@@ -121,7 +121,8 @@ def catalogue(objects: list[str], distance_cm: int, config, workers: int, work: 
     generate.capture_workers = lambda: workers
     try:
         wall, cpu = time.perf_counter(), time.process_time()
-        generate.generate_catalogue(work / f"workers{workers}", [distance_cm], objects, config)
+        generate.generate_catalogue(Path(tempfile.mkdtemp(prefix=f"workers{workers}-", dir=work)), [distance_cm],
+                                    objects, config)
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     finally:
         generate.capture_workers = default

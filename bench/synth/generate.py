@@ -25,7 +25,7 @@ import numpy as np
 
 from bench.synth import depth_camera, motion, ownership, photogrammetry, radar_scene, writer
 from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
-from bench.synth.leg_sum import PARTIAL_SUMS
+from bench.synth.leg_sum import PARTIAL_SUMS, single_threaded_blas
 from bench.synth.meshes import rotation_matrix
 from bench.synth.scenes import CATALOGUE, build_scene
 
@@ -228,7 +228,10 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
     ownership.claim(root)
     unique = list(dict.fromkeys(pairs))       # a capture asked for twice is built once
     done: dict[tuple[str, int], CaptureResult] = {}
-    with ownership.exclusive(root, on_wait), ThreadPoolExecutor(min(capture_workers(), len(unique))) as pool:
+    # BLAS single-threaded throughout: calls from captures built at once into a multi-threaded OpenBLAS contend
+    # (its workers busy-wait); the captures' own threads use the cores
+    with (ownership.exclusive(root, on_wait), single_threaded_blas(),
+          ThreadPoolExecutor(min(capture_workers(), len(unique))) as pool):
         futures = [pool.submit(_ensure_locked, root, o, d, config, force) for o, d in unique]
         try:
             for pair, future in zip(unique, futures, strict=True):
@@ -242,7 +245,7 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
 
 
 def capture_workers() -> int:
-    """Captures built at once: each one's radar sums take leg_sum.PARTIAL_SUMS threads; at least two, so that
-    one capture's single-threaded stages (ray casting, depth camera, files) overlap another's sums."""
+    """Captures built at once: one per leg_sum.PARTIAL_SUMS cores (each capture's radar sums take that many threads),
+    so one at a time on 2 cores (two at once measured 10-20 % more CPU time there, no faster), eight on 16."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(2, cores // PARTIAL_SUMS)
+    return max(1, cores // PARTIAL_SUMS)

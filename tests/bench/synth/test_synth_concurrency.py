@@ -67,6 +67,7 @@ def test_captures_built_at_once_are_the_files_built_one_at_a_time(tmp_path, monk
     of a run that builds one at a time, and the manifest records every capture."""
     from bench.synth import generate
 
+    monkeypatch.setattr(generate, "capture_workers", lambda: 2)
     concurrent = generate_catalogue(tmp_path / "at_once", [30], OBJECTS, FAST)
     monkeypatch.setattr(generate, "capture_workers", lambda: 1)
     generate_catalogue(tmp_path / "one_by_one", [30], OBJECTS, FAST)
