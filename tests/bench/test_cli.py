@@ -37,6 +37,9 @@ STRESS_PRECISION = ["{py} -m bench.stress --precision-only --quick --out {tmp}/g
 # {synth}: the synth_root fixture, {tmp}: an empty folder of this test, {repo}: the checkout.
 REPORT_RUN = ["cp -r {repo}/results/table3 {tmp}/table3", "{py} -m bench.report {tmp}/table3 --out {tmp}/report.html",
               "test -s {tmp}/report.html"]
+# one run, for real (one capture, 2FSK: seconds); the MM-2FSK run is test_app's
+ONE_RUN = ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=2fsk freq=d05 "
+           "prior=none device=cpu store.dir=null hydra.run.dir={tmp}/run", "test -s {tmp}/run/results.csv"]
 DOC_RUNS: dict[str, list[str]] = {
     "bash run.sh demo": ["bash run.sh demo --help"],
     "bash run.sh test": ["bash run.sh test --help"],
@@ -86,11 +89,11 @@ DOC_RUNS: dict[str, list[str]] = {
         ["{py} -m bench experiment=table3 hydra/launcher=submitit_local --cfg all"],
     r"python -m bench -m experiment=table2\|table3\|runtime [hydra/launcher=local\|slurm_cpu\|slurm_gpu\|submitit_local]":
         ["{py} -m bench experiment=runtime hydra/launcher=submitit_local --cfg all"],
-    # one run, for real (one capture, 2FSK: seconds); the MM-2FSK run is test_app's
+    ".venv/bin/python -m bench dataset=maroon dataset.root=data/synthetic dataset.captures=[01_plate/30] method=2fsk "
+    "freq=d05 prior=none hydra.run.dir=outputs/one": ONE_RUN,
     r"python -m bench dataset.root=DIR method=bp\|2fsk\|3fsk\|mm2fsk freq=CONFIG "
     r"prior=none\|realsense\|photogrammetry [device=cpu\|cuda] hydra.run.dir=OUT":
-        ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=2fsk freq=d05 "
-         "prior=none device=cpu store.dir=null hydra.run.dir={tmp}/run", "test -s {tmp}/run/results.csv"],
+        ONE_RUN,
     ".venv/bin/python -m bench profile=faithful dataset=maroon dataset.root=/data/maroon method=mm2fsk freq=d10 "
     "prior=realsense":      # for real on one capture with 2FSK (seconds); the faithful rows say so
         ["{py} -m bench profile=faithful dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] "
@@ -153,9 +156,9 @@ DOC_RUNS: dict[str, list[str]] = {
         ["{py} -m bench.perf memory --help"],
     # new frames of every capture, minutes on the CPU; test_perf_skips_gpu runs its parts
     ".venv/bin/python -m bench.perf skips-gpu --root data/synthetic --device cuda":
-        ["{py} -m bench.perf skips_gpu --help"],
+        ["{py} -m bench.perf skips-gpu --help"],
     ".venv/bin/python -m bench.perf skips-gpu --root data/synthetic --device cpu --cases bp_d05,bp_full "
-    "--variants auto": ["{py} -m bench.perf skips_gpu --help"],
+    "--variants auto": ["{py} -m bench.perf skips-gpu --help"],
     "python -m bench.perf": ["{py} -m bench.perf --help"],           # lists the benchmarks
     "python -m bench.perf <name>": ["{py} -m bench.perf --help"],
     r"python -m bench.perf correlate\|frames\|stream\|sweep\|overhead\|memory\|fill\|skips\|skips-gpu ... [--out DIR]":
