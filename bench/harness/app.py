@@ -157,7 +157,8 @@ def _pairing_columns(capture: Capture, capture_dir: Path) -> dict:
 
 
 def _container(node):
-    return None if node is None else OmegaConf.to_container(node)
+    """A config node as plain Python (a resolver's value, e.g. freq.f_ghz, is plain already)."""
+    return OmegaConf.to_container(node) if OmegaConf.is_config(node) else node
 
 
 def _roi(cfg: DictConfig) -> str | dict:
