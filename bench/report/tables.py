@@ -84,6 +84,13 @@ def row_label(method: str, freq: str, label: str | None = None, parameters: str 
     return f"{name} {parameters}" if parameters else name
 
 
+def job_label(results_csv: Path) -> str:
+    """The row label of one job's results (its first row: method, freq, its own `label` and `parameters`)."""
+    first = pd.read_csv(results_csv, nrows=1).iloc[0]
+    given = lambda column: str(first[column]) if column in first and pd.notna(first[column]) else None  # noqa: E731
+    return row_label(first.method, first.freq, given("label"), given(scoring.PARAMETERS) or "")
+
+
 def method_labels(rows: pd.DataFrame) -> dict[str, str]:
     """Label per method name of the rows: their `label` column (methods of one's own), else the built-in's."""
     labels = {}
