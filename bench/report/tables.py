@@ -153,11 +153,22 @@ def _against_best(summary: pd.DataFrame, matrices: dict[str, pd.DataFrame], comm
             summary[f"{metric}_{k}"] = values
 
 
+def _distinct(labels: list[str], summary: pd.DataFrame) -> list[str]:
+    """Row labels made unique: where rows share one (same method and configuration, another prior or grid), the
+    prior and then the grid are added ('MM-2FSK Δ10.0 (photogrammetry)')."""
+    for column in ("prior", "grid"):
+        counts = pd.Series(labels).value_counts()
+        labels = [f"{label} ({value})" if counts[label] > 1 else label
+                  for label, value in zip(labels, summary[column], strict=True)]
+    return labels
+
+
 def _scored(rows: pd.DataFrame, floor_pct: float) -> tuple[pd.DataFrame, pd.DataFrame, dict, dict]:
     """(outcomes, summary, metric matrices, common captures per metric) of a table's rows."""
     outcome = scoring.outcomes(rows, floor_pct)
     keys = scoring.group_columns(rows)
-    rows = rows.assign(_alone=rows["timing"].eq("alone") if "timing" in rows else False)
+    rows = rows.assign(_alone=rows["timing"].eq("alone") if "timing" in rows else False,
+                       runtime_ms=rows["runtime_ms"] if "runtime_ms" in rows else np.nan)
     if scoring.PARAMETERS in rows:
         rows[scoring.PARAMETERS] = rows[scoring.PARAMETERS].fillna("").astype(str)
     shown = [m for m in INTERVAL_COLUMNS if m in outcome]
@@ -183,8 +194,8 @@ def _scored(rows: pd.DataFrame, floor_pct: float) -> tuple[pd.DataFrame, pd.Data
     order = summary.method.map(_method_order) * 100 + summary.freq.map(_freq_order)
     summary = summary.iloc[np.argsort(order.to_numpy(), kind="stable")].reset_index(drop=True)
     labels = method_labels(rows)
-    summary.insert(0, "row", [row_label(m, f, labels[m], p) for m, f, p in zip(
-        summary.method, summary.freq, summary.get(scoring.PARAMETERS, [""] * len(summary)), strict=True)])
+    summary.insert(0, "row", _distinct([row_label(m, f, labels[m], p) for m, f, p in zip(
+        summary.method, summary.freq, summary.get(scoring.PARAMETERS, [""] * len(summary)), strict=True)], summary))
     for metric in METRICS_CM:
         summary[f"{metric}_rank"] = _ranked(summary, metric)
     _against_best(summary, matrices, common)
@@ -200,6 +211,9 @@ def summarise(rows: pd.DataFrame, floor_pct: float = scoring.COVERAGE_FLOOR_PCT)
     return _scored(rows, floor_pct)[1]
 
 
+PAIR_COLUMNS = ["metric", "a", "b", "captures", "a_better", "b_better", "mean_diff_cm", "p"]
+
+
 def paired_comparisons(rows: pd.DataFrame, floor_pct: float = scoring.COVERAGE_FLOOR_PCT) -> pd.DataFrame:
     """Every pair of rows per metric on the metric's common captures: `metric`, `a`, `b`, `captures`, `a_better`,
     `b_better` (captures where each is lower), `mean_diff_cm` (a - b) and the permutation test's `p`."""
@@ -211,7 +225,7 @@ def paired_comparisons(rows: pd.DataFrame, floor_pct: float = scoring.COVERAGE_F
             result = uncertainty.paired(matrix.loc[i], matrix.loc[j])
             lines.append({"metric": metric, "a": a, "b": b, "captures": result.n, "a_better": result.a_better,
                           "b_better": result.b_better, "mean_diff_cm": result.mean_diff, "p": result.p_value})
-    return pd.DataFrame(lines)
+    return pd.DataFrame(lines, columns=PAIR_COLUMNS)
 
 
 def pair_of(pairs: pd.DataFrame, metric: str, a: str, b: str) -> tuple[int, int, int, float] | None:
@@ -319,10 +333,6 @@ def _formatted(summary: pd.DataFrame, bold) -> pd.DataFrame:
     return shown
 
 
-def _p(value: float) -> str:
-    return "–" if not np.isfinite(value) else f"{value:.2g}" if value < 0.1 else f"{value:.2f}"
-
-
 def against_best(summary: pd.DataFrame) -> pd.DataFrame:
     """Per row and metric, the paired comparison with the best row as text: 'best better in 6/7, p 0.03'; for the
     best row its margin over the runner-up ('best; better than X in 6/7, p 0.03')."""
@@ -336,9 +346,10 @@ def against_best(summary: pd.DataFrame) -> pd.DataFrame:
                 cells.append("–")
             elif best.get(metric) == i:
                 cells.append(f"best; better than {line[f'{metric}_vs']} in {line[f'{metric}_better']}/{pairs}, "
-                             f"p {_p(line[f'{metric}_p'])}")
+                             f"p {uncertainty.p_text(line[f'{metric}_p'])}")
             else:
-                cells.append(f"best better in {line[f'{metric}_worse']}/{pairs}, p {_p(line[f'{metric}_p'])}")
+                cells.append(f"best better in {line[f'{metric}_worse']}/{pairs}, "
+                             f"p {uncertainty.p_text(line[f'{metric}_p'])}")
         shown[SHOWN_COLUMNS[metric]] = cells
     return shown
 
@@ -350,10 +361,10 @@ def failures_list(summary: pd.DataFrame) -> list[str]:
 
 
 def to_markdown(table: pd.DataFrame) -> str:
-    """A plain Markdown table, floats to two decimals."""
+    """A plain Markdown table, floats to two decimals, missing numbers as '–'."""
     header = "| " + " | ".join(map(str, table.columns)) + " |"
     rule = "|" + "|".join("---" for _ in table.columns) + "|"
-    body = ["| " + " | ".join(f"{v:.2f}" if isinstance(v, float) else str(v) for v in row) + " |"
+    body = ["| " + " | ".join(_number(v) if isinstance(v, float) else str(v) for v in row) + " |"
             for row in table.itertuples(index=False)]
     return "\n".join([header, rule, *body])
 

@@ -55,6 +55,11 @@ def mean_interval(values) -> Interval:
                     int(values.size))
 
 
+def p_text(value: float) -> str:
+    """A p-value as text: two significant digits, 'n/a' where there is none (fewer than two captures)."""
+    return "n/a" if not np.isfinite(value) else f"{value:.2g}"
+
+
 def _mean_difference(a, b, axis=-1):
     return np.mean(a - b, axis=axis)
 

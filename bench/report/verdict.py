@@ -7,14 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from bench.report import tables
+from bench.report import tables, uncertainty
 from bench.report.plots import pareto_front
 
 FRONT_METRIC = "P_cm"
-
-
-def _p(value: float) -> str:
-    return "n/a" if not np.isfinite(value) else f"{value:.2g}"
 
 
 def _mean(line: pd.Series, metric: str) -> str:
@@ -38,7 +34,7 @@ def best_lines(summary: pd.DataFrame) -> list[str]:
             else:
                 text += (f"; better than the runner-up {runner.row} ({runner[metric]:.2f} cm) in "
                          f"{best[f'{metric}_better']} of {best[f'{metric}_pairs']} captures, "
-                         f"p {_p(best[f'{metric}_p'])}")
+                         f"p {uncertainty.p_text(best[f'{metric}_p'])}")
         lines.append(text)
     return lines
 
@@ -69,7 +65,7 @@ def baseline_lines(summary: pd.DataFrame, pairs: pd.DataFrame) -> list[str]:
         n, better, worse, p = found
         lines.append(f"{tables.SHOWN_COLUMNS[metric]}: {best.row} {best[metric]:.2f} cm against the camera's "
                      f"{camera[metric]:.2f} cm ({best[metric] / camera[metric]:.2f}x); the radar better in "
-                     f"{better} of {n} captures, the camera in {worse}, p {_p(p)}")
+                     f"{better} of {n} captures, the camera in {worse}, p {uncertainty.p_text(p)}")
     return [f"What the radar adds over the depth camera alone ({camera.row}), for the best radar row on P:",
             *lines]
 
