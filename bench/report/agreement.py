@@ -39,7 +39,7 @@ import pandas as pd
 from scipy import stats
 
 from bench import cli
-from bench.report import tables, uncertainty
+from bench.report import scoring, tables, uncertainty
 
 PAPER_METRICS = ["C_g_cm", "C_s_cm", "P_cm", "P_e_cm"]
 # MM-2FSK.txt, Table II (photogrammetry prior, 45 objects at 30 cm): C_g, C_s, P, P_e in cm
@@ -158,16 +158,34 @@ def means(rows: pd.DataFrame) -> pd.DataFrame:
     return scored(rows)[0]
 
 
+def _capture_names(rows: pd.DataFrame) -> pd.Series:
+    return rows.object.astype(str) + " " + rows.distance.astype(str)
+
+
+def _reconstructed_by_all(rows: pd.DataFrame) -> set[str]:
+    """The captures (bench.report.scoring names) every cell of the rows reconstructed."""
+    outcome = scoring.outcomes(rows)
+    return set(scoring.common_captures(scoring.metric_matrix(outcome, "P_cm")))
+
+
 def views(rows: pd.DataFrame) -> dict[tuple[str, str], tuple[pd.DataFrame, pd.DataFrame]]:
-    """`scored` per (profile, paper table 'II' or 'III') present in the rows."""
+    """`scored` per (profile, paper table 'II' or 'III') present in the rows. Where both profiles are present, a
+    table's means and pairs of both are over the same captures: those every cell reconstructed under every
+    profile; `failed` still counts each profile's own failures."""
     found = {}
     profile = profile_of(rows)
     in_table2 = rows.cell.str.endswith("@photogrammetry")
-    for name in PROFILES:
-        for table, mask in (("II", in_table2), ("III", ~in_table2)):
-            part = rows[(profile == name) & mask]
-            if len(part):
-                found[(name, table)] = scored(part)
+    for table, mask in (("II", in_table2), ("III", ~in_table2)):
+        parts = {name: rows[(profile == name) & mask] for name in PROFILES if ((profile == name) & mask).any()}
+        if len(parts) < 2:
+            found.update({(name, table): scored(part) for name, part in parts.items()})
+            continue
+        shared = set.intersection(*(_reconstructed_by_all(part) for part in parts.values()))
+        for name, part in parts.items():
+            whole = scored(part)[0]
+            summary, pairs = scored(part[_capture_names(part).isin(shared)])
+            summary[["failed", "captures"]] = whole.loc[summary.index, ["failed", "captures"]]
+            found[(name, table)] = summary, pairs
     return found
 
 
@@ -437,17 +455,18 @@ def report(rows: pd.DataFrame, preset_name: str, objects: list[str]) -> list[str
     missing = [p for p in PROFILES if p not in present]
     n = {key: int(summary.P_cm_n.max()) for key, (summary, _) in found.items()}
     counts = "; ".join(f"Table {t} ({p}): P over {n[(p, t)]} captures" for p, t in sorted(n))
+    not_run = (f"; not run here: {', '.join(missing)} (python -m bench.report.agreement --profiles sound faithful, "
+               "or --faithful-results DIR)" if missing else "")
     orders = [part for p in present if (p, "III") in found
               for part in (f"\n{p}:\n", _markdown(orderings(found[(p, "III")][0], PAPER_TABLE3, labels)))]
     return [f"# Paper agreement: synthetic preset `{preset_name}` against MM-2FSK Tables II and III\n",
             f"Captures: {', '.join(objects)} at 30 cm (paper: 45 MAROON objects at 30 cm). Metrics in cm. Like "
             f"with like: within each table and profile every mean is over the captures all its cells count "
-            f"(bench.report.tables: P where every cell reconstructed the capture; {counts}); relations are paired "
-            f"per capture. Profiles: sound (ours) and faithful (MAROON's reference definitions, which the paper "
-            f"follows)" + (f"; not run here: {', '.join(missing)} (python -m bench.report.agreement --profiles "
-                           f"sound faithful, or --faithful-results DIR)" if missing else "") + ". § marks a "
-            "geometry-fixed cell: a scalar-prior cell whose coarse pair cannot reach the object at 30 cm from the "
-            "0.40 m prior, so its error is the prior's distance to the object whatever the method does.",
+            f"(bench.report.tables: P where every cell reconstructed the capture; with both profiles, where every "
+            f"cell did under both; {counts}); relations are paired per capture. Profiles: sound (ours) and faithful "
+            f"(MAROON's reference definitions, which the paper follows)" + not_run + ". § marks a geometry-fixed "
+            "cell: a scalar-prior cell whose coarse pair cannot reach the object at 30 cm from the 0.40 m prior, so "
+            "its error is the prior's distance to the object whatever the method does.",
             "\n## The paper's stated relations (Section IV.C)\n", _bullets(relations(found, labels) + cost_relations),
             "\n## What the radar adds over the depth camera alone (not in the paper)\n",
             _bullets(radar_over_camera(rows)),

@@ -57,7 +57,7 @@ def test_report_compares_like_with_like_both_profiles_relations_first(tmp_path):
     assert ("BP_max < MM-2FSK Δ10.0 on P (paper 0.94 vs 1.36 cm): sound: reversed (2.00 vs 1.36 cm; BP_max "
             "better in 0 of 1 captures, p n/a); faithful: holds (1.00 vs 1.36 cm; BP_max better in 1 of 1 captures, "
             "p n/a)") in text
-    assert "| BP_max | 0/2 / 0/2 | 3.00 | 1.00 | 0.82 |" in text             # C_g over both captures, both profiles
+    assert "| BP_max | 0/2 / 0/2 | 2.00 | 1.00 | 0.82 |" in text             # both profiles on 01_plate alone
     assert "| MM-2FSK Δ0.5 | 1/2 / 1/2 |" in text and "| 2FSK Δ10.0 § |" in text
     assert "| Prior only (no radar) | 0/2 / 0/2 | 1.00 | 1.00 | – |" in text
     assert ("MM-2FSK Δ10.0: the RealSense prior costs on P, Table III / Table II > 1 (paper x7.16): sound: holds "
