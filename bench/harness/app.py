@@ -37,11 +37,21 @@ from bench.maroon.frames import parse_frame_spec, select_frames
 from bench.progress import each
 from methods.domain.capture import Capture, RadarGrid
 from methods.domain.errors import DatasetError
+from methods.ops.frequencies import config_targets_ghz
 from metrics.evaluate import GroundTruth, evaluate, ground_truth, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
 
 log = logging.getLogger("bench")
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
+
+
+def _freq_ghz(name: str) -> list[float] | None:
+    """configs/freq/*.yaml's `f_ghz`: the targets of the one frequency table (methods.ops.frequencies)."""
+    targets = config_targets_ghz(name)
+    return None if targets is None else list(targets)
+
+
+OmegaConf.register_new_resolver("freq_ghz", _freq_ghz, replace=True)
 
 
 def _capture_dirs(dataset: DictConfig, root: Path) -> list[Path]:

@@ -25,8 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.progress import each
-
-C_M_PER_S = 299_792_458.0
+from methods.domain.radar import C_M_PER_S
 
 
 def export_frames(root: Path, out: Path, objects: list[str] | None) -> None:

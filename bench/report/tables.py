@@ -30,10 +30,10 @@ import pandas as pd
 
 from bench import cli
 from bench.report import scoring, uncertainty
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.frequencies import CONFIGS_GHZ, max_unambiguous_depth_m, select_frequencies
 from methods.registry import BUILTIN, label_of
 
-MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 RESULTS_DIR = Path(__file__).resolve().parents[2] / "results"
 METRICS_CM = scoring.METRICS_CM
 GROUP_COLUMNS = scoring.GROUP_COLUMNS

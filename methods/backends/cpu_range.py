@@ -32,9 +32,9 @@ from threadpoolctl import threadpool_limits
 
 from methods.backends.cpu import path_excess_m as _path_excess_m
 from methods.backends.cpu import phasor_mod_2pi as _phasor_mod_2pi
+from methods.domain.radar import C_M_PER_S
 from methods.ops import range_compression
 
-C_M_PER_S = 299_792_458.0
 OVERSAMPLING = 32          # Q on the CPU (profile samples per frequency-grid bin)
 MIN_FREQS = 16             # from this many frequencies on, BP's CPU depth search uses range compression
 CHUNK_POINTS = 256         # points per chunk: (RX_BLOCK x 94 x 256) work arrays of ~1.5 MB stay in L2

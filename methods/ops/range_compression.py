@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-C_M_PER_S = 299_792_458.0
+from methods.domain.radar import C_M_PER_S
+
 OVERSAMPLING = 16          # Q: profile samples per grid bin
 RANGE_REL_TOL = 1e-2       # stated bound of ||range - direct|| / ||direct||
 RANGE_MIN_FREQS = 16       # from this many frequencies on, "auto" uses range compression on Warp devices

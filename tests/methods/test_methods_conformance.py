@@ -14,12 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from methods import Method, reconstruct
-from methods.method import MethodError
-from methods.registry import BUILTIN, make_method, method_class
-
-from devices import CUDA
-from methods_scenes import (
+from bench.synth.memory import (
     TABLE1_FREQS_HZ,
     make_capture,
     plane_depth_frame,
@@ -28,6 +23,11 @@ from methods_scenes import (
     simulate,
     square_grid,
 )
+from methods import Method, reconstruct
+from methods.method import MethodError
+from methods.registry import BUILTIN, make_method, method_class
+
+from devices import CUDA
 
 GRID = square_grid(0.003, 7, 0.29, 0.31, 11)            # 7 x 7 pixels of 1 mm; BP: 11 depths of 2 mm
 SLOPE_X = 0.05                                          # plate z = 0.30 + 0.05 x

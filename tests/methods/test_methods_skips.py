@@ -11,6 +11,15 @@ import dataclasses
 import numpy as np
 import pytest
 
+from bench.synth.memory import (
+    ANTENNAS,
+    MAROON_FREQS_HZ,
+    TABLE1_FREQS_HZ,
+    add_noise,
+    make_capture,
+    plate_points_m,
+    simulate,
+)
 from methods import reconstruct
 from methods.backends import correlate_volume
 from methods.backends.cpu_range import correlate_range, path_bounds_m, range_table
@@ -27,7 +36,6 @@ from methods.skips.roi import dilate, full_roi, roi_from_mask_bb
 from methods.skips.settings import ALL, NONE, SkipSettings, default_for, resolve
 
 from devices import CUDA
-from methods_scenes import ANTENNAS, MAROON_FREQS_HZ, TABLE1_FREQS_HZ, add_noise, make_capture, plate_points_m, simulate
 
 GRID = RadarGrid((-0.02, -0.02, 0.27), (0.02, 0.02, 0.35), (21, 21, 81))        # 2 mm pixels, 1 mm depth steps
 SCATTERERS_M = np.array([[0.004, -0.006, 0.300], [-0.010, 0.008, 0.318], [0.012, 0.010, 0.290]])
