@@ -125,11 +125,13 @@ def geometry_fixed(cell: str, distance_cm: float = 30.0) -> bool:
     (bench.report.placement's window), so its error sits near the prior's distance to the object whatever the
     method does."""
     from bench.report.placement import windows_m
+    from methods.domain.radar import MAROON_FREQS_HZ
 
     method, freq, _ = split_cell(cell)
     if method not in ("2fsk", "3fsk"):
         return False
-    near_m, far_m = windows_m(tables.MAROON_FREQS_HZ, [freq.split("_")[0]])[freq.split("_")[0]]
+    coarse = freq.split("_")[0]
+    near_m, far_m = windows_m(MAROON_FREQS_HZ, [coarse])[coarse]
     return not near_m <= distance_cm / 100 <= far_m
 
 
