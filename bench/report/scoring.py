@@ -22,7 +22,7 @@ METRICS_CM = ["C_g_cm", "C_s_cm", "P_cm", "P_e_cm"]
 ON_SUCCESS = ("P_cm", "P_e_cm")                       # counted only where the row reconstructed the capture
 WHEREVER_DEFINED = ("C_g_cm", "C_s_cm", "coverage_pct", "off_pct")
 GROUP_COLUMNS = ["method", "freq", "prior", "grid"]
-PARAMETERS = "parameters"                             # swept settings of a row (bench.harness.app), when present
+PARAMETERS = "params"           # swept settings of a row (bench.harness.app: `offset_mm=2`), when present
 CAPTURE_COLUMNS = ["object", "distance", "frame"]
 PER_CAPTURE = ["object", "distance"]
 COVERAGE_FLOOR_PCT = 10.0
@@ -44,11 +44,6 @@ def _failure_reason(rows: pd.DataFrame, floor_pct: float) -> pd.Series:
         low = (reason == "") & (coverage < floor_pct)          # NaN: not recorded (older rows), no floor
         reason = reason.where(~low, [f"covers {c:.1f} % of the silhouette (floor {floor_pct:g} %)" for c in coverage])
     return reason
-
-
-def succeeded(rows: pd.DataFrame, floor_pct: float = COVERAGE_FLOOR_PCT) -> pd.Series:
-    """Per result row: every metric defined, no `failure` recorded and coverage at least `floor_pct`."""
-    return _failure_reason(rows, floor_pct) == ""
 
 
 def outcomes(rows: pd.DataFrame, floor_pct: float = COVERAGE_FLOOR_PCT) -> pd.DataFrame:

@@ -3,7 +3,8 @@
 Table I lists, per two-frequency configuration, the frequencies actually selected from the MAROON sweep
 `linspace(72, 82, 128)` GHz, their difference and the maximum unambiguous depth correction c / (4 delta_f).
 Tables II and III (and the runtime table) summarise result rows per method x frequency configuration x prior x
-grid (x swept `parameters`, where the rows carry them), metrics in centimetres, in the paper's row order.
+grid (x swept parameters, the `params` column, where the rows carry it), metrics in centimetres, in the paper's row
+order.
 
 Fair comparison (bench.report.scoring): a row reconstructed a capture when its metrics are defined and its points
 cover at least `--coverage-floor` (10 %) of the ground-truth silhouette; every other capture of the table is one
@@ -70,7 +71,7 @@ def _nominal_delta(name: str) -> str:
 
 def row_label(method: str, freq: str, label: str | None = None, parameters: str = "") -> str:
     """The paper's row names: BP_max, BP Δ0.5, 2FSK Δ1.0, 3FSK(Δ0.5, Δ10.0), MM-2FSK Δ10.0, followed by the
-    row's swept `parameters` where it has any ('custom Δ10.0 offset_mm=2'). `label` is the method's own (its
+    row's swept parameters (`params`) where it has any ('custom Δ10.0 offset_mm=2'). `label` is the method's own (its
     class's `label`, the rows' `label` column); by default that of the built-in `method`. The depth camera alone
     (BASELINE_METHOD) uses no radar frequency: 'Prior only (no radar)'."""
     label = label or label_of(method)
@@ -85,7 +86,7 @@ def row_label(method: str, freq: str, label: str | None = None, parameters: str 
 
 
 def job_label(results_csv: Path) -> str:
-    """The row label of one job's results (its first row: method, freq, its own `label` and `parameters`)."""
+    """The row label of one job's results (its first row: method, freq, its own `label` and `params`)."""
     first = pd.read_csv(results_csv, nrows=1).iloc[0]
     given = lambda column: str(first[column]) if column in first and pd.notna(first[column]) else None  # noqa: E731
     return row_label(first.method, first.freq, given("label"), given(scoring.PARAMETERS) or "")
@@ -109,8 +110,6 @@ def _freq_order(freq: str) -> int:
     """BP_max first, then the configurations in Table I's order, unknown ones last."""
     return FREQ_ORDER.index(freq) if freq in FREQ_ORDER else len(FREQ_ORDER)
 
-
-succeeded = scoring.succeeded
 
 
 def _weighted_off_error_cm(lines: pd.DataFrame) -> float:

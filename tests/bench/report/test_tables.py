@@ -145,7 +145,7 @@ def test_a_missing_row_is_a_failure_and_contended_runtimes_are_not_shown():
 def test_rows_of_a_parameter_sweep_stay_apart():
     from bench.report.tables import summarise
 
-    rows = pd.concat([_rows([("custom", "d10", "realsense", v)]).assign(parameters=p, label="Bias")
+    rows = pd.concat([_rows([("custom", "d10", "realsense", v)]).assign(params=p, label="Bias")
                       for v, p in ((0.2, "offset_mm=0"), (0.4, "offset_mm=2"), (0.7, "offset_mm=5"))])
     summary = summarise(rows)
     assert list(summary.row) == ["Bias Δ10.0 offset_mm=0", "Bias Δ10.0 offset_mm=2", "Bias Δ10.0 offset_mm=5"]
