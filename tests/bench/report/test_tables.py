@@ -202,3 +202,21 @@ def test_latex_tables_compile(tmp_path):
     result = subprocess.run([engine, "-interaction=nonstopmode", "-halt-on-error", "t.tex"], cwd=tmp_path,
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stdout[-2000:]
+
+
+def test_the_verdict_names_the_best_the_front_and_what_the_radar_adds():
+    from bench.report.tables import paired_comparisons, summarise
+    from bench.report.verdict import verdict
+
+    rows = _rows([("mm2fsk", "d10", "realsense", 0.5), ("prior_only", "d10", "realsense", 0.4),
+                  ("bp", "d05", "none", 0.7)])
+    rows["label"] = np.where(rows.method == "prior_only", "Prior only", None)
+    rows["runtime_ms"] = rows.method.map({"mm2fsk": 80.0, "prior_only": 30.0, "bp": 5000.0})
+    found = verdict(summarise(rows), paired_comparisons(rows))
+    assert found["best"][2] == ("P: Prior only (no radar), 0.90 cm [0.40, 1.40] over 2 of 2 captures; better than "
+                                "the runner-up MM-2FSK Δ10.0 (1.00 cm) in 2 of 2 captures, p 0.5")
+    assert found["front"] == ["Runtime against error (P): the front, fastest first: Prior only (no radar) (30 ms, "
+                              "P 0.90 cm)."]
+    assert ("P: MM-2FSK Δ10.0 1.00 cm against the camera's 0.90 cm (1.11x); the radar better in 0 of 2 captures, "
+            "the camera in 2, p 0.5") in found["baseline"]
+    assert found["marked"] == ["No row failed on any capture: every mean covers every capture."]
