@@ -471,11 +471,11 @@ def main() -> int:
     rows = load_rows(args.table, args.results)
     summary = summarise(rows, args.coverage_floor)
     text = caption(args.table, rows, args.coverage_floor, summary)
-    print(f"{text}\n\n{summary_markdown(summary)}")
-    if csv_file:
+    if csv_file:                # the files first: a reader closing stdout early (`| head`) must not lose them
         write_csv(summary, csv_file, paired_comparisons(rows, args.coverage_floor))
     if latex_file:
         latex_file.write_text(summary_latex(summary, text))
+    print(f"{text}\n\n{summary_markdown(summary)}")
     return 0
 
 
