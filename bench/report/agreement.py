@@ -147,6 +147,9 @@ def scored(rows: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
     cells compared on the same captures (bench.report.tables)."""
     summary = tables.summarise(rows)
     cell_of = {(m, f, p): c for m, f, p, c in zip(rows.method, rows.freq, rows.prior, rows.cell, strict=True)}
+    if len(set(cell_of.values())) < rows.cell.nunique():
+        raise ValueError(f"cells {', '.join(sorted(set(rows.cell)))}: two of them have the same method, frequency "
+                         "configuration and prior (a Table II sweep run without the photogrammetry prior?)")
     cells = [cell_of[(m, f, p)] for m, f, p in zip(summary.method, summary.freq, summary.prior, strict=True)]
     by_row = dict(zip(summary.row, cells, strict=True))
     pairs = tables.paired_comparisons(rows)
