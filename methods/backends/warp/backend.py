@@ -79,11 +79,11 @@ class WarpBackend(Backend):
         return correlation.to_complex(run())
 
     def _volume_kernel(self, freqs_hz, method: str) -> str:
-        if method not in ("auto", "direct", "range"):
-            raise ValueError(f"method must be 'auto', 'direct' or 'range', got {method!r}")
+        if method not in ("auto", "direct", "range", "columns"):
+            raise ValueError(f"method must be 'auto', 'direct', 'range' or 'columns', got {method!r}")
         if method == "auto":
             method = "range" if range_compression.worth_it(freqs_hz) else "direct"
-        return "range" if method == "range" else self.default_kernel
+        return method if method in ("range", "columns") else self.default_kernel
 
     def volume(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, method: str = "auto", kernel: str | None = None
                ) -> np.ndarray:
@@ -94,11 +94,13 @@ class WarpBackend(Backend):
         run = self.make_launch(signal, freqs_hz, tx_m, rx_m, kernel=kernel, grid_m=(x_m, y_m, z_m), reuse=True)
         return correlation.to_complex(run())[0].reshape(len(z_m), len(y_m), len(x_m))
 
-    def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None):
+    def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None,
+                    method: str = "auto"):
+        """As `Backend.volume_peak`; `method` as in `volume` ("columns": the accurate column-separable sum)."""
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         x_m, y_m, z_m = grid_vectors(x_m, y_m, z_m)
         return correlation.volume_peak(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m,
-                                       kernel=self._volume_kernel(freqs_hz, "auto"), timer=timer)
+                                       kernel=self._volume_kernel(freqs_hz, method), timer=timer)
 
     def realsense_prior(self, depth, realsense2radar, grid, keep_on_device: bool = False,
                         fill: str = DEFAULT_FILL) -> Prior:

@@ -8,11 +8,12 @@ from contextlib import nullcontext
 import numpy as np
 import warp as wp
 
+from methods.backends.warp import columns
 from methods.backends.warp import correlation_kernels as kernels
 from methods.backends.warp.frames import C_M_PER_S, BufferPool, FrameCache, FrameInputs
 from methods.ops import range_compression
 
-KERNELS = ("tc", "separable", "direct", "range")
+KERNELS = ("tc", "separable", "direct", "range", "columns")
 
 
 def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
@@ -52,9 +53,10 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
                 inputs: FrameInputs | None = None):
     """Upload inputs once; return a function that runs `kernel` and returns the device output (rows, N) vec2f.
 
-    kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct" or "range" (frequency sum only; the
+    kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct", "range" (frequency sum only; the
     range profiles are rebuilt on every call, as a new frame needs, over the paths the grid's or the points' box
-    can reach). Points come from `points_m` (N, 3) or from
+    can reach) or "columns" (grids only: the column-separable sum of `columns`, tables rebuilt on every call).
+    Points come from `points_m` (N, 3) or from
     `grid_m` = (x_m, y_m, z_m); with a grid the output is summed over frequencies, flat in (z, y, x) order.
     Frame inputs are cached by content; with `reuse` the output and work buffers are pre-allocated ones shared
     between calls (the API copies the output back before returning). The benchmark times the returned function.
@@ -79,6 +81,14 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
     n_out = points_m.shape[0] if grid_m is None else x.shape[0] * y.shape[0] * z.shape[0]
     out_shape = (1 if sum_freqs else inputs.n_freqs, n_out)
     out = buffers.get("out", out_shape, wp.vec2f) if reuse else wp.empty(out_shape, dtype=wp.vec2f, device=dev)
+    if kernel == "columns":
+        if grid_m is None:
+            raise ValueError("the columns kernel computes volumes: pass grid_m")
+        rplan = columns.cached_plan(inputs.tx_m, inputs.freqs_hz, *grid_m)
+        if rplan is None:
+            raise ValueError("the columns kernel needs transmitters on at most "
+                             f"{columns.kernels.MAX_COLUMNS} columns of >= {columns.MIN_TABLE_COLUMN} elements")
+        return columns.make_volume_launch(inputs, buffers, rplan, *grid_m, out)
     if kernel == "range":
         if not sum_freqs:
             raise ValueError("the range kernel gives the frequency sum only (sum_freqs=True)")
