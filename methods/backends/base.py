@@ -70,6 +70,11 @@ class Backend:
         a backend may prepare the frame's inputs once."""
         return lambda points_m: self.correlate_summed(signal, freqs_hz, tx_m, rx_m, points_m)
 
+    def search_depth(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, plan, threshold_db, z_edges_are_grid_edges):
+        """BP's coarse-to-fine search (`methods.skips.bp_search.search_depth`) where the data lives, as a
+        SearchResult, or None where this backend leaves it to the host-driven search."""
+        return None
+
     def volume(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, method: str = "auto") -> np.ndarray:
         """complex64 (nz, ny, nx) frequency-summed phasors on the grid (axes in the order the vectors are given)."""
         raise NotImplementedError

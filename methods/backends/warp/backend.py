@@ -6,7 +6,7 @@ import numpy as np
 import warp as wp
 
 from methods.backends.base import Backend, check_inputs, grid_vectors
-from methods.backends.warp import correlation, fsk, prior
+from methods.backends.warp import correlation, fsk, prior, search
 from methods.backends.warp.frame_graph import frame_graph, fsk_graph
 from methods.backends.warp.frames import BufferPool, FrameCache
 from methods.backends.warp.prior import DeferredPrior
@@ -37,6 +37,8 @@ class WarpBackend(Backend):
         self.default_kernel = "separable" if self.device.is_cpu else "tc"
         self.rasterises_prior = not self.device.is_cpu
         self.warmed: set = set()
+        #: BP's coarse-to-fine search with many frequencies runs on the device (`search`); False: host-driven
+        self.device_search = True
 
     def make_launch(self, signal, freqs_hz, tx_m, rx_m, *, kernel: str | None = None, points_m=None, grid_m=None,
                     sum_freqs: bool = False, reuse: bool = False):
@@ -70,6 +72,17 @@ class WarpBackend(Backend):
                                              points_m=points_m, sum_freqs=True, reuse=True, inputs=inputs)
             return correlation.to_complex(launch())[0]
         return run
+
+    def search_depth(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, plan, threshold_db, z_edges_are_grid_edges):
+        """On the device end to end with many equidistant frequencies (range-compressed values, as
+        `summed_at_points` gives them); None (the host-driven search) otherwise or when `device_search` is off."""
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        if not self.device_search or self._volume_kernel(freqs_hz, "auto") != "range" or len(z_m) < 2:
+            return None
+        inputs = self.frames.inputs(signal, freqs_hz, tx_m, rx_m)
+        return search.search_depth(inputs, self.buffers, np.asarray(x_m, dtype=np.float64),
+                                   np.asarray(y_m, dtype=np.float64), np.asarray(z_m, dtype=np.float64), plan,
+                                   threshold_db, z_edges_are_grid_edges)
 
     def _points(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs):
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)

@@ -23,9 +23,10 @@ def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
     return range_compression.path_bounds_m(tx_m, rx_m, lo_m, hi_m)
 
 
-def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box_m):
-    """Upload the DFT tables once; return a function that builds the range profiles over the paths the box
-    `box_m` = (x_m, y_m, z_m) can reach and gathers every voxel (flag 1) or point (flag 0)."""
+def range_profiles(inputs: FrameInputs, freqs_hz, box_m):
+    """(function that builds the frame's range profiles over the paths the box `box_m` = (x_m, y_m, z_m) can reach,
+    the gather's arguments after the points: rx, tx, k_c, carrier cycles per metre, samples per metre, m0,
+    profiles). The DFT tables are uploaded once per frame."""
     rplan = range_compression.plan(freqs_hz)
     if rplan is None:
         raise ValueError("range compression needs >= 2 distinct frequencies on an equidistant grid "
@@ -36,14 +37,24 @@ def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box
     sig, twiddle, shift, index = inputs.range_tables(rplan)
     profiles = wp.empty((n_rx * n_tx_pad, n_window), dtype=wp.vec2h, device=dev)
     k_c = 2 * np.pi * rplan.f_carrier_hz / C_M_PER_S
-    gather_args = [flag, points, x, y, z, inputs.rx, inputs.tx_padded, wp.float32(k_c),
-                   wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S), wp.float32(rplan.samples_per_m),
-                   wp.float32(m0), profiles, out]
+    gather_args = [inputs.rx, inputs.tx_padded, wp.float32(k_c), wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S),
+                   wp.float32(rplan.samples_per_m), wp.float32(m0), profiles]
 
-    def run():
+    def build():
         wp.launch(kernels.range_profiles, dim=(n_rx * n_tx_pad, n_window),
                   inputs=[sig, index, twiddle, shift, int(m0) % rplan.n_samples, profiles], device=dev)
-        wp.launch(kernels.range_gather, dim=out.shape[1], inputs=gather_args, block_dim=256, device=dev)
+    return build, gather_args
+
+
+def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box_m):
+    """Return a function that builds the range profiles over the paths the box `box_m` can reach
+    (`range_profiles`) and gathers every voxel (flag 1) or point (flag 0)."""
+    build, gather_args = range_profiles(inputs, freqs_hz, box_m)
+    args = [flag, points, x, y, z] + gather_args + [out]
+
+    def run():
+        build()
+        wp.launch(kernels.range_gather, dim=out.shape[1], inputs=args, block_dim=256, device=inputs.device)
         return out
     return run
 

@@ -310,18 +310,13 @@ def range_profiles(signal: wp.array2d(dtype=wp.vec2f), grid_index: wp.array(dtyp
     profiles[pair, j] = wp.vec2h(cmul(shift[m], acc))
 
 
-@wp.kernel(module="unique", module_options={"enable_backward": False, "max_unroll": 32})
-def range_gather(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.float64),
-                 y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
-                 rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
-                 carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
-                 profiles: wp.array2d(dtype=wp.vec2h), out: wp.array2d(dtype=wp.vec2f)):
-    """Value at voxel or point i (`point_at`: flat voxel i of the grid x, y, z, or points[i]): sum over pairs of
-    carrier phasor times the linearly interpolated range profile. Tx (padded to a multiple of TX_CHUNK, zero
-    profiles in the pads) in chunks of RANGE_CHUNK whose sample offsets and carrier phasors stay in registers; the
-    profile window starts at sample m0 (path lengths the volume or the points' box can reach)."""
-    i = wp.tid()
-    p64 = point_at(i, grid, points, x, y, z)
+@wp.func
+def range_value(p64: wp.vec3d, rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
+                carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
+                profiles: wp.array2d(dtype=wp.vec2h)) -> wp.vec2f:
+    """Range-compressed value at point p64: sum over pairs of carrier phasor times the linearly interpolated range
+    profile. Tx (padded to a multiple of TX_CHUNK, zero profiles in the pads) in chunks of RANGE_CHUNK whose sample
+    offsets and carrier phasors stay in registers; the profile window starts at sample m0."""
     norm64 = wp.length(p64)
     p = wp.vec3f(p64)
     norm = wp.float32(norm64)
@@ -351,7 +346,19 @@ def range_gather(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(dtype=
                 gb += cmul(g, wp.vec2f(b_re[j], b_im[j]))
             phase = k_carrier * e_rx
             acc += cmul(wp.vec2f(wp.cos(phase), wp.sin(phase)), gb)
-    out[0, i] = cmul(acc, phasor_of_cycles(norm64 * carrier_cycles_per_m))
+    return cmul(acc, phasor_of_cycles(norm64 * carrier_cycles_per_m))
+
+
+@wp.kernel(module="unique", module_options={"enable_backward": False, "max_unroll": 32})
+def range_gather(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.float64),
+                 y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
+                 rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
+                 carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
+                 profiles: wp.array2d(dtype=wp.vec2h), out: wp.array2d(dtype=wp.vec2f)):
+    """`range_value` of voxel or point i (`point_at`: flat voxel i of the grid x, y, z, or points[i])."""
+    i = wp.tid()
+    out[0, i] = range_value(point_at(i, grid, points, x, y, z), rx, tx, k_carrier, carrier_cycles_per_m,
+                            samples_per_m, m0, profiles)
 
 
 @wp.kernel(enable_backward=False)

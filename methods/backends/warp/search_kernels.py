@@ -1,0 +1,157 @@
+"""Warp kernels of BP's coarse-to-fine depth search on the device (launched by `methods.backends.warp.search`).
+
+The per-pixel rules are `methods.skips.bp_search.search_depth`'s, one thread per pixel, the samples |V| of every
+pixel in `mag` (n_z, N) (-1: not evaluated) and the level that evaluated each in `level`:
+* `search_coarse`: each pixel's coarse samples (every `step`-th depth and the last), its coarse maximum, and the
+  image's coarse maximum (atomic);
+* `search_refine`: the filter-aware skip against the image's coarse maximum, then level by level the candidates
+  (samples evaluated before the level within its window of the pixel's best) and their +-spacing neighbours, the
+  climb to the argmax, and the parabola depth (as `volume_peak_depth`); a peak on a depth edge that is not a grid
+  edge gives NaN.
+Values come from the range-compressed profiles (`range_value`, the volume's and the point gather's own).
+"""
+from __future__ import annotations
+
+import warp as wp
+
+from methods.backends.warp.correlation_kernels import range_value
+
+SEARCH_OPTIONS = {"enable_backward": False, "max_unroll": 32}
+
+
+@wp.func
+def sample(p: int, k: int, xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64), z0_m: wp.float64,
+           dz_m: wp.float64, rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
+           carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
+           profiles: wp.array2d(dtype=wp.vec2h)) -> wp.float32:
+    """|V| of pixel p at depth index k."""
+    point = wp.vec3d(xs[p], ys[p], z0_m + wp.float64(k) * dz_m)
+    return wp.length(range_value(point, rx, tx, k_carrier, carrier_cycles_per_m, samples_per_m, m0, profiles))
+
+
+@wp.kernel(module="unique", module_options=SEARCH_OPTIONS)
+def search_coarse(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64), z0_m: wp.float64,
+                  dz_m: wp.float64, step: wp.array(dtype=wp.int32), rx: wp.array(dtype=wp.vec3f),
+                  tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32, carrier_cycles_per_m: wp.float64,
+                  samples_per_m: wp.float32, m0: wp.float32, profiles: wp.array2d(dtype=wp.vec2h),
+                  mag: wp.array2d(dtype=wp.float32), level: wp.array2d(dtype=wp.int32),
+                  coarse_max: wp.array(dtype=wp.float32), image_max: wp.array(dtype=wp.float32),
+                  count: wp.array(dtype=wp.int32)):
+    """Coarse samples of pixel p (mag set to -1 elsewhere), its maximum, the image's maximum (image_max zeroed)."""
+    p = wp.tid()
+    n_z = mag.shape[0]
+    for k in range(n_z):
+        mag[k, p] = -1.0
+    s = wp.min(step[p], wp.max(n_z - 1, 1))
+    best = wp.float32(0.0)
+    n = int(0)
+    k = int(0)
+    while k < n_z:
+        v = sample(p, k, xs, ys, z0_m, dz_m, rx, tx, k_carrier, carrier_cycles_per_m, samples_per_m, m0, profiles)
+        mag[k, p] = v
+        level[k, p] = 0
+        best = wp.max(best, v)
+        n += 1
+        if k == n_z - 1:
+            k = n_z
+        else:
+            k = wp.min(k + s, n_z - 1)
+    coarse_max[p] = best
+    wp.atomic_max(image_max, 0, best)
+    wp.atomic_add(count, 0, n)
+
+
+@wp.func
+def candidate_ratio(loss_curve_db: wp.array2d(dtype=wp.float32), p: int, spacing: int, margin_db: wp.float32
+                    ) -> wp.float32:
+    """10^(-(loss at spacing + margin) / 20): the candidate window of a level (`SearchPlan.candidate_db`)."""
+    k = wp.clamp(spacing, 1, loss_curve_db.shape[1]) - 1
+    return wp.pow(10.0, -(loss_curve_db[p, k] + margin_db) / 20.0)
+
+
+@wp.func
+def first_argmax(mag: wp.array2d(dtype=wp.float32), p: int) -> int:
+    n_z = mag.shape[0]
+    kb = int(0)
+    best = mag[0, p]
+    for k in range(1, n_z):
+        if mag[k, p] > best:
+            best = mag[k, p]
+            kb = k
+    return kb
+
+
+@wp.func
+def db_of(m: wp.float32) -> wp.float64:
+    return wp.float64(20.0) * wp.log10(wp.max(wp.float64(m), wp.float64(1.1754943508222875e-38)))
+
+
+@wp.kernel(module="unique", module_options=SEARCH_OPTIONS)
+def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64), z0_m: wp.float64,
+                  dz_m: wp.float64, step: wp.array(dtype=wp.int32), loss_curve_db: wp.array2d(dtype=wp.float32),
+                  margin_db: wp.float32, keep_ratio: wp.float32, edge_lo: int, edge_hi: int,
+                  rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
+                  carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
+                  profiles: wp.array2d(dtype=wp.vec2h), mag: wp.array2d(dtype=wp.float32),
+                  level: wp.array2d(dtype=wp.int32), coarse_max: wp.array(dtype=wp.float32),
+                  image_max: wp.array(dtype=wp.float32), count: wp.array(dtype=wp.int32),
+                  maps: wp.array2d(dtype=wp.float64)):
+    """Refinement, climb and depth of pixel p: maps[0, p] depth (NaN: skipped or on a cut edge), maps[1, p] the
+    max projection (the coarse maximum where skipped). keep_ratio 0: no filter-aware skip; edge_lo/edge_hi 1 where
+    the first/last depth is a grid edge."""
+    p = wp.tid()
+    n_z = mag.shape[0]
+    spacing = wp.min(step[p], wp.max(n_z - 1, 1))
+    window = candidate_ratio(loss_curve_db, p, spacing, margin_db)
+    cmax = coarse_max[p]
+    active = cmax > 0.0
+    if keep_ratio > 0.0:
+        active = active and cmax >= image_max[0] * keep_ratio * window
+    if not active:
+        maps[0, p] = wp.float64(wp.nan)
+        maps[1, p] = wp.float64(cmax)
+        return
+    n = int(0)
+    lvl = int(1)
+    while spacing > 1:
+        best = mag[first_argmax(mag, p), p]
+        threshold = best * window
+        spacing = (spacing + 1) // 2
+        for k in range(n_z):
+            if mag[k, p] >= threshold and level[k, p] < lvl:
+                for side in range(2):
+                    kk = k - spacing + 2 * side * spacing
+                    if kk >= 0 and kk < n_z:
+                        if mag[kk, p] < 0.0:
+                            mag[kk, p] = sample(p, kk, xs, ys, z0_m, dz_m, rx, tx, k_carrier, carrier_cycles_per_m,
+                                                samples_per_m, m0, profiles)
+                            level[kk, p] = lvl
+                            n += 1
+        window = candidate_ratio(loss_curve_db, p, spacing, margin_db)
+        lvl += 1
+    climbing = int(1)
+    while climbing == 1:
+        kb = first_argmax(mag, p)
+        climbing = 0
+        for side in range(2):
+            kk = kb - 1 + 2 * side
+            if kk >= 0 and kk < n_z:
+                if mag[kk, p] < 0.0:
+                    mag[kk, p] = sample(p, kk, xs, ys, z0_m, dz_m, rx, tx, k_carrier, carrier_cycles_per_m,
+                                        samples_per_m, m0, profiles)
+                    n += 1
+                    climbing = 1
+    kb = first_argmax(mag, p)
+    db_m = db_of(mag[wp.max(kb - 1, 0), p])
+    db_0 = db_of(mag[kb, p])
+    db_p = db_of(mag[wp.min(kb + 1, n_z - 1), p])
+    curvature = db_m - wp.float64(2.0) * db_0 + db_p
+    offset = wp.float64(0.0)
+    if curvature < wp.float64(0.0):
+        offset = wp.float64(0.5) * (db_m - db_p) / curvature
+    depth = z0_m + (wp.float64(kb) + offset) * dz_m
+    if (kb == 0 and edge_lo == 0) or (kb == n_z - 1 and edge_hi == 0):
+        depth = wp.float64(wp.nan)
+    maps[0, p] = depth
+    maps[1, p] = wp.float64(mag[kb, p])
+    wp.atomic_add(count, 0, n)
