@@ -44,8 +44,8 @@ def search_coarse(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
         mag[k, p] = -1.0
     s = wp.min(step[p], wp.max(n_z - 1, 1))
     best = wp.float32(0.0)
-    n = int(0)
-    k = int(0)
+    n = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
+    k = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     while k < n_z:
         v = sample(p, k, xs, ys, z0_m, dz_m, rx, tx, k_carrier, carrier_cycles_per_m, samples_per_m, m0, profiles)
         mag[k, p] = v
@@ -72,7 +72,7 @@ def candidate_ratio(loss_curve_db: wp.array2d(dtype=wp.float32), p: int, spacing
 @wp.func
 def first_argmax(mag: wp.array2d(dtype=wp.float32), p: int) -> int:
     n_z = mag.shape[0]
-    kb = int(0)
+    kb = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     best = mag[0, p]
     for k in range(1, n_z):
         if mag[k, p] > best:
@@ -111,8 +111,8 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
         maps[0, p] = wp.float64(wp.nan)
         maps[1, p] = wp.float64(cmax)
         return
-    n = int(0)
-    lvl = int(1)
+    n = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
+    lvl = int(1)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     while spacing > 1:
         best = mag[first_argmax(mag, p), p]
         threshold = best * window
@@ -129,7 +129,7 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
                             n += 1
         window = candidate_ratio(loss_curve_db, p, spacing, margin_db)
         lvl += 1
-    climbing = int(1)
+    climbing = int(1)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     while climbing == 1:
         kb = first_argmax(mag, p)
         climbing = 0

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from bench.maroon.antennas import load_antenna_array
-from devices import CUDA
 from methods.domain.radar import C_M_PER_S
 from methods.skips import bp_search
+
+from devices import CUDA
 
 ANT = load_antenna_array()
 FREQS_HZ = np.linspace(72e9, 82e9, 128)[40:72]       # 32 equidistant frequencies: the range-compressed path
