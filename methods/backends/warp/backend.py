@@ -6,7 +6,7 @@ import numpy as np
 import warp as wp
 
 from methods.backends.base import Backend, check_inputs, grid_vectors
-from methods.backends.warp import correlation, fsk, prior, search
+from methods.backends.warp import columns, correlation, fsk, prior, search
 from methods.backends.warp.frame_graph import frame_graph, fsk_graph
 from methods.backends.warp.frames import BufferPool, FrameCache
 from methods.backends.warp.prior import DeferredPrior
@@ -39,13 +39,15 @@ class WarpBackend(Backend):
         self.warmed: set = set()
         #: BP's coarse-to-fine search with many frequencies runs on the device (`search`); False: host-driven
         self.device_search = True
+        #: per-term interpolation bound of the "columns" volume kernel (its accuracy knob: the rho step follows)
+        self.column_term_tol = columns.TERM_TOL
 
     def make_launch(self, signal, freqs_hz, tx_m, rx_m, *, kernel: str | None = None, points_m=None, grid_m=None,
                     sum_freqs: bool = False, reuse: bool = False):
         """`correlation.make_launch` on this device (the benchmarks time the function it returns)."""
         return correlation.make_launch(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m,
                                        kernel=kernel or self.default_kernel, points_m=points_m, grid_m=grid_m,
-                                       sum_freqs=sum_freqs, reuse=reuse)
+                                       sum_freqs=sum_freqs, reuse=reuse, term_tol=self.column_term_tol)
 
     def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel: str | None = None) -> np.ndarray:
         """complex64 (F, N); `kernel` "tc", "separable" or "direct" (None: the device's default)."""
@@ -113,7 +115,8 @@ class WarpBackend(Backend):
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         x_m, y_m, z_m = grid_vectors(x_m, y_m, z_m)
         return correlation.volume_peak(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m,
-                                       kernel=self._volume_kernel(freqs_hz, method), timer=timer)
+                                       kernel=self._volume_kernel(freqs_hz, method), timer=timer,
+                                       term_tol=self.column_term_tol)
 
     def realsense_prior(self, depth, realsense2radar, grid, keep_on_device: bool = False,
                         fill: str = DEFAULT_FILL) -> Prior:

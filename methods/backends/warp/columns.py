@@ -131,16 +131,17 @@ def plan(tx_m: np.ndarray, freqs_hz: np.ndarray, x_m: np.ndarray, y_m: np.ndarra
 
 
 @functools.lru_cache(maxsize=16)
-def _cached_plan(tx_key: bytes, freqs_key: bytes, x_key: bytes, y_key: bytes, z_key: bytes) -> ColumnPlan | None:
+def _cached_plan(tx_key: bytes, freqs_key: bytes, x_key: bytes, y_key: bytes, z_key: bytes, term_tol: float
+                 ) -> ColumnPlan | None:
     keys = (tx_key, freqs_key, x_key, y_key, z_key)
     tx_m, freqs_hz, x_m, y_m, z_m = (np.frombuffer(k, dtype=np.float64) for k in keys)
-    return plan(tx_m.reshape(-1, 3), freqs_hz, x_m, y_m, z_m)
+    return plan(tx_m.reshape(-1, 3), freqs_hz, x_m, y_m, z_m, term_tol=term_tol)
 
 
-def cached_plan(tx_m, freqs_hz, x_m, y_m, z_m) -> ColumnPlan | None:
-    """`plan` at TERM_TOL, computed once per array, frequency set and grid (fresh frames reuse it)."""
+def cached_plan(tx_m, freqs_hz, x_m, y_m, z_m, term_tol: float = TERM_TOL) -> ColumnPlan | None:
+    """`plan`, computed once per array, frequency set, grid and bound (fresh frames reuse it)."""
     keys = [np.ascontiguousarray(a, dtype=np.float64).tobytes() for a in (tx_m, freqs_hz, x_m, y_m, z_m)]
-    return _cached_plan(*keys)
+    return _cached_plan(*keys, float(term_tol))
 
 
 def make_volume_launch(inputs: FrameInputs, buffers: BufferPool, rplan: ColumnPlan, x_m, y_m, z_m, out: wp.array):

@@ -61,12 +61,13 @@ def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box
 
 def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m, rx_m, *, kernel: str,
                 points_m=None, grid_m=None, sum_freqs: bool = False, reuse: bool = False,
-                inputs: FrameInputs | None = None):
+                inputs: FrameInputs | None = None, term_tol: float = columns.TERM_TOL):
     """Upload inputs once; return a function that runs `kernel` and returns the device output (rows, N) vec2f.
 
     kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct", "range" (frequency sum only; the
     range profiles are rebuilt on every call, as a new frame needs, over the paths the grid's or the points' box
-    can reach) or "columns" (grids only: the column-separable sum of `columns`, tables rebuilt on every call).
+    can reach) or "columns" (grids only: the column-separable sum of `columns` with the rho step of `term_tol`,
+    tables rebuilt on every call).
     Points come from `points_m` (N, 3) or from
     `grid_m` = (x_m, y_m, z_m); with a grid the output is summed over frequencies, flat in (z, y, x) order.
     Frame inputs are cached by content; with `reuse` the output and work buffers are pre-allocated ones shared
@@ -95,7 +96,7 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
     if kernel == "columns":
         if grid_m is None:
             raise ValueError("the columns kernel computes volumes: pass grid_m")
-        rplan = columns.cached_plan(inputs.tx_m, inputs.freqs_hz, *grid_m)
+        rplan = columns.cached_plan(inputs.tx_m, inputs.freqs_hz, *grid_m, term_tol)
         if rplan is None:
             raise ValueError("the columns kernel needs transmitters on at most "
                              f"{columns.kernels.MAX_COLUMNS} columns of >= {columns.MIN_TABLE_COLUMN} elements")
@@ -143,14 +144,15 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
 
 
 def volume_peak(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float,
-                *, kernel: str, timer=None) -> tuple[np.ndarray, np.ndarray]:
+                *, kernel: str, timer=None,
+                term_tol: float = columns.TERM_TOL) -> tuple[np.ndarray, np.ndarray]:
     """BP depth extraction on the device: the volume (as `make_launch` on the grid) stays there,
     `volume_peak_depth` reduces it over z, and only (depth, max projection), each float64 (ny, nx), come back.
     `timer` (a StageTimer) gets the stages "correlate" and "depth" (synchronised)."""
     stage = timer.stage if timer is not None else (lambda name: nullcontext())
     with stage("correlate"):
         run = make_launch(frames, buffers, signal, freqs_hz, tx_m, rx_m, kernel=kernel, grid_m=(x_m, y_m, z_m),
-                          reuse=True)
+                          reuse=True, term_tol=term_tol)
         vol = run()
         dev = vol.device
         wp.synchronize_device(dev)

@@ -311,12 +311,13 @@ def range_profiles(signal: wp.array2d(dtype=wp.vec2f), grid_index: wp.array(dtyp
 
 
 @wp.func
-def range_value(p64: wp.vec3d, rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
-                carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
-                profiles: wp.array2d(dtype=wp.vec2h)) -> wp.vec2f:
-    """Range-compressed value at point p64: sum over pairs of carrier phasor times the linearly interpolated range
-    profile. Tx (padded to a multiple of TX_CHUNK, zero profiles in the pads) in chunks of RANGE_CHUNK whose sample
-    offsets and carrier phasors stay in registers; the profile window starts at sample m0."""
+def range_partial(p64: wp.vec3d, lane: int, stride: int, rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f),
+                  k_carrier: wp.float32, samples_per_m: wp.float32, m0: wp.float32,
+                  profiles: wp.array2d(dtype=wp.vec2h)) -> wp.vec2f:
+    """Range-compressed value at point p64 without its common phasor, over the receivers r = lane (mod stride):
+    sum over pairs of carrier phasor times the linearly interpolated range profile. Tx (padded to a multiple of
+    TX_CHUNK, zero profiles in the pads) in chunks of RANGE_CHUNK whose sample offsets and carrier phasors stay in
+    registers; the profile window starts at sample m0."""
     norm64 = wp.length(p64)
     p = wp.vec3f(p64)
     norm = wp.float32(norm64)
@@ -333,7 +334,7 @@ def range_value(p64: wp.vec3d, rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=
             u_tx[j] = e * samples_per_m
             b_re[j] = wp.cos(k_carrier * e)
             b_im[j] = wp.sin(k_carrier * e)
-        for r in range(rx.shape[0]):
+        for r in range(lane, rx.shape[0], stride):
             e_rx = path_excess_m(p, norm, rx[r])
             base = (2.0 * norm + e_rx) * samples_per_m - m0
             row = r * n_tx + t0
@@ -346,7 +347,7 @@ def range_value(p64: wp.vec3d, rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=
                 gb += cmul(g, wp.vec2f(b_re[j], b_im[j]))
             phase = k_carrier * e_rx
             acc += cmul(wp.vec2f(wp.cos(phase), wp.sin(phase)), gb)
-    return cmul(acc, phasor_of_cycles(norm64 * carrier_cycles_per_m))
+    return acc
 
 
 @wp.kernel(module="unique", module_options={"enable_backward": False, "max_unroll": 32})
@@ -355,10 +356,12 @@ def range_gather(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(dtype=
                  rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
                  carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
                  profiles: wp.array2d(dtype=wp.vec2h), out: wp.array2d(dtype=wp.vec2f)):
-    """`range_value` of voxel or point i (`point_at`: flat voxel i of the grid x, y, z, or points[i])."""
+    """Range-compressed value of voxel or point i (`point_at`: flat voxel i of the grid x, y, z, or points[i]):
+    `range_partial` over every receiver times the common phasor exp(j k_c 2 |p|) (float64 reduced)."""
     i = wp.tid()
-    out[0, i] = range_value(point_at(i, grid, points, x, y, z), rx, tx, k_carrier, carrier_cycles_per_m,
-                            samples_per_m, m0, profiles)
+    p64 = point_at(i, grid, points, x, y, z)
+    acc = range_partial(p64, 0, 1, rx, tx, k_carrier, samples_per_m, m0, profiles)
+    out[0, i] = cmul(acc, phasor_of_cycles(wp.length(p64) * carrier_cycles_per_m))
 
 
 @wp.kernel(enable_backward=False)

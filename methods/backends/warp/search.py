@@ -35,11 +35,12 @@ def search_depth(inputs: FrameInputs, buffers: BufferPool, x_m: np.ndarray, y_m:
     keep_ratio = 0.0 if threshold_db is None else float(10.0 ** (-threshold_db / 20.0))
     where = [xs, ys, wp.float64(z_m[0]), wp.float64(dz_m), step]
     build()
-    wp.launch(search_kernels.search_coarse, dim=n_px,
-              inputs=where + gather_args + [mag, level, coarse_max, image_max, count], device=dev)
-    wp.launch(search_kernels.search_refine, dim=n_px,
-              inputs=where + [loss, wp.float32(plan.margin_db), wp.float32(keep_ratio),
-                              int(z_edges_are_grid_edges[0]), int(z_edges_are_grid_edges[1])]
-              + gather_args + [mag, level, coarse_max, image_max, count, maps], device=dev)
+    block = search_kernels.SEARCH_BLOCK
+    wp.launch_tiled(search_kernels.search_coarse, dim=[n_px], block_dim=block,
+                    inputs=where + gather_args + [mag, level, coarse_max, image_max, count], device=dev)
+    wp.launch_tiled(search_kernels.search_refine, dim=[n_px], block_dim=block,
+                    inputs=where + [loss, wp.float32(plan.margin_db), wp.float32(keep_ratio),
+                                    int(z_edges_are_grid_edges[0]), int(z_edges_are_grid_edges[1])]
+                    + gather_args + [mag, level, coarse_max, image_max, count, maps], device=dev)
     host = maps.numpy()
     return SearchResult(host[0].copy(), host[1].copy(), int(count.numpy()[0]))

@@ -1,32 +1,36 @@
 """Warp kernels of BP's coarse-to-fine depth search on the device (launched by `methods.backends.warp.search`).
 
-The per-pixel rules are `methods.skips.bp_search.search_depth`'s, one thread per pixel, the samples |V| of every
-pixel in `mag` (n_z, N) (-1: not evaluated) and the level that evaluated each in `level`:
+The per-pixel rules are `methods.skips.bp_search.search_depth`'s, one block per pixel (SEARCH_BLOCK threads on CUDA
+splitting the receivers of each sample, `range_partial`, summed by a tile reduction and broadcast, so every thread
+takes the same decisions; Warp-CPU runs blocks of one thread), the samples |V| of every pixel in `mag` (n_z, N)
+(-1: not evaluated) and the level that evaluated each in `level`:
 * `search_coarse`: each pixel's coarse samples (every `step`-th depth and the last), its coarse maximum, and the
   image's coarse maximum (atomic);
 * `search_refine`: the filter-aware skip against the image's coarse maximum, then level by level the candidates
   (samples evaluated before the level within its window of the pixel's best) and their +-spacing neighbours, the
   climb to the argmax, and the parabola depth (as `volume_peak_depth`); a peak on a depth edge that is not a grid
   edge gives NaN.
-Values come from the range-compressed profiles (`range_value`, the volume's and the point gather's own).
+Values come from the range-compressed profiles (the volume's and the point gather's own values).
 """
 from __future__ import annotations
 
 import warp as wp
 
-from methods.backends.warp.correlation_kernels import range_value
+from methods.backends.warp.correlation_kernels import range_partial
 
 SEARCH_OPTIONS = {"enable_backward": False, "max_unroll": 32}
+SEARCH_BLOCK = 32                  # threads per pixel on CUDA (one warp)
 
 
 @wp.func
-def sample(p: int, k: int, xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64), z0_m: wp.float64,
+def sample(p: int, k: int, lane: int, xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64), z0_m: wp.float64,
            dz_m: wp.float64, rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
-           carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
+           samples_per_m: wp.float32, m0: wp.float32,
            profiles: wp.array2d(dtype=wp.vec2h)) -> wp.float32:
-    """|V| of pixel p at depth index k."""
+    """|V| of pixel p at depth index k, the same in every thread of the block (lane: this thread's index)."""
     point = wp.vec3d(xs[p], ys[p], z0_m + wp.float64(k) * dz_m)
-    return wp.length(range_value(point, rx, tx, k_carrier, carrier_cycles_per_m, samples_per_m, m0, profiles))
+    part = range_partial(point, lane, wp.block_dim(), rx, tx, k_carrier, samples_per_m, m0, profiles)
+    return wp.length(wp.tile_extract(wp.tile_sum(wp.tile(part, preserve_type=True)), 0))
 
 
 @wp.kernel(module="unique", module_options=SEARCH_OPTIONS)
@@ -37,8 +41,9 @@ def search_coarse(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
                   mag: wp.array2d(dtype=wp.float32), level: wp.array2d(dtype=wp.int32),
                   coarse_max: wp.array(dtype=wp.float32), image_max: wp.array(dtype=wp.float32),
                   count: wp.array(dtype=wp.int32)):
-    """Coarse samples of pixel p (mag set to -1 elsewhere), its maximum, the image's maximum (image_max zeroed)."""
-    p = wp.tid()
+    """Coarse samples of pixel p (mag set to -1 elsewhere), its maximum, the image's maximum (image_max zeroed).
+    Every thread of the block writes the same values."""
+    p, lane = wp.tid()
     n_z = mag.shape[0]
     for k in range(n_z):
         mag[k, p] = -1.0
@@ -47,7 +52,7 @@ def search_coarse(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
     n = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     k = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     while k < n_z:
-        v = sample(p, k, xs, ys, z0_m, dz_m, rx, tx, k_carrier, carrier_cycles_per_m, samples_per_m, m0, profiles)
+        v = sample(p, k, lane, xs, ys, z0_m, dz_m, rx, tx, k_carrier, samples_per_m, m0, profiles)
         mag[k, p] = v
         level[k, p] = 0
         best = wp.max(best, v)
@@ -57,8 +62,9 @@ def search_coarse(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
         else:
             k = wp.min(k + s, n_z - 1)
     coarse_max[p] = best
-    wp.atomic_max(image_max, 0, best)
-    wp.atomic_add(count, 0, n)
+    if lane == 0:
+        wp.atomic_max(image_max, 0, best)
+        wp.atomic_add(count, 0, n)
 
 
 @wp.func
@@ -99,7 +105,7 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
     """Refinement, climb and depth of pixel p: maps[0, p] depth (NaN: skipped or on a cut edge), maps[1, p] the
     max projection (the coarse maximum where skipped). keep_ratio 0: no filter-aware skip; edge_lo/edge_hi 1 where
     the first/last depth is a grid edge."""
-    p = wp.tid()
+    p, lane = wp.tid()
     n_z = mag.shape[0]
     spacing = wp.min(step[p], wp.max(n_z - 1, 1))
     window = candidate_ratio(loss_curve_db, p, spacing, margin_db)
@@ -123,7 +129,7 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
                     kk = k - spacing + 2 * side * spacing
                     if kk >= 0 and kk < n_z:
                         if mag[kk, p] < 0.0:
-                            mag[kk, p] = sample(p, kk, xs, ys, z0_m, dz_m, rx, tx, k_carrier, carrier_cycles_per_m,
+                            mag[kk, p] = sample(p, kk, lane, xs, ys, z0_m, dz_m, rx, tx, k_carrier,
                                                 samples_per_m, m0, profiles)
                             level[kk, p] = lvl
                             n += 1
@@ -137,7 +143,7 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
             kk = kb - 1 + 2 * side
             if kk >= 0 and kk < n_z:
                 if mag[kk, p] < 0.0:
-                    mag[kk, p] = sample(p, kk, xs, ys, z0_m, dz_m, rx, tx, k_carrier, carrier_cycles_per_m,
+                    mag[kk, p] = sample(p, kk, lane, xs, ys, z0_m, dz_m, rx, tx, k_carrier,
                                         samples_per_m, m0, profiles)
                     n += 1
                     climbing = 1
@@ -154,4 +160,5 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
         depth = wp.float64(wp.nan)
     maps[0, p] = depth
     maps[1, p] = wp.float64(mag[kb, p])
-    wp.atomic_add(count, 0, n)
+    if lane == 0:
+        wp.atomic_add(count, 0, n)
