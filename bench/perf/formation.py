@@ -26,6 +26,7 @@ from methods.bp import reconstruct_bp
 from methods.domain.capture import RadarGrid
 from methods.domain.radar import C_M_PER_S
 from methods.ops.correlate import correlate_reference
+from methods.skips import bp_search
 from methods.skips import settings as skip_settings
 
 ALL_FREQS_HZ = np.linspace(72e9, 82e9, 128)
@@ -136,16 +137,35 @@ def search_rows(backend, antennas, n_xy: int, n_z: int, n_frames: int, rng) -> l
     frames = [scene_frame(antennas, ALL_FREQS_HZ, rng) for _ in range(n_frames + 1)]
     results: dict = {True: [], False: []}
     times: dict = {True: [], False: []}
-    for i, frame in enumerate(frames):
-        for on in (True, False):
-            backend.device_search = on
+    search_ms: dict = {True: [], False: []}
+    spent = []
+
+    def timing(fn):
+        def run(*args, **kwargs):
             start = time.perf_counter()
-            rec = reconstruct_bp(frame, ALL_FREQS_HZ, antennas, grid, backend=backend, skips=skips)
+            out = fn(*args, **kwargs)
             wp.synchronize_device(backend.device)
-            if i > 0:
-                times[on].append((time.perf_counter() - start) * 1e3)
-            results[on].append(rec)
-    backend.device_search = True
+            spent.append((time.perf_counter() - start) * 1e3)
+            return out
+        return run
+    device_search, host_search = backend.search_depth, bp_search.search_depth
+    backend.search_depth, bp_search.search_depth = timing(device_search), timing(host_search)
+    try:
+        for i, frame in enumerate(frames):
+            for on in (True, False):
+                backend.device_search = on
+                spent.clear()
+                start = time.perf_counter()
+                rec = reconstruct_bp(frame, ALL_FREQS_HZ, antennas, grid, backend=backend, skips=skips)
+                wp.synchronize_device(backend.device)
+                if i > 0:
+                    times[on].append((time.perf_counter() - start) * 1e3)
+                    search_ms[on].append(sum(spent))
+                results[on].append(rec)
+    finally:
+        backend.device_search = True
+        del backend.search_depth
+        bp_search.search_depth = host_search
     both = [np.isfinite(a.depth_m) & np.isfinite(b.depth_m) for a, b in zip(results[True], results[False],
                                                                             strict=True)]
     agree = [100.0 * float(np.mean(np.abs(a.depth_m[m] - b.depth_m[m]) <= DEPTH_TOL_M)) if m.any() else 100.0
@@ -156,7 +176,11 @@ def search_rows(backend, antennas, n_xy: int, n_z: int, n_frames: int, rng) -> l
                      "frame_median_ms": percentile(times[on], 50), "frame_p90_ms": percentile(times[on], 90),
                      "evaluated_median": float(np.median([r.extra.get("evaluated_voxels", 0) for r in results[on]])),
                      "valid_px_median": float(np.median([np.isfinite(r.depth_m).sum() for r in results[on]])),
+                     "search_median_ms": percentile(search_ms[on], 50),
                      "agree_within_0p1mm_pct_min": min(agree)})
+        for stage in results[on][-1].timings_ms:
+            rows[-1][f"stage_{stage}_ms"] = float(np.median([r.timings_ms.get(stage, np.nan)
+                                                             for r in results[on][1:]]))
         print(rows[-1], flush=True)
     return rows
 

@@ -39,6 +39,7 @@ class WarpBackend(Backend):
         self.warmed: set = set()
         #: BP's coarse-to-fine search with many frequencies runs on the device (`search`); False: host-driven
         self.device_search = True
+        self.search_profiles = search.FrameProfiles()
         #: per-term interpolation bound of the "columns" volume kernel (its accuracy knob: the rho step follows)
         self.column_term_tol = columns.TERM_TOL
 
@@ -75,16 +76,32 @@ class WarpBackend(Backend):
             return correlation.to_complex(launch())[0]
         return run
 
-    def search_depth(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, plan, threshold_db, z_edges_are_grid_edges):
+    def search_depth(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, plan, threshold_db, z_edges_are_grid_edges,
+                     hull_m=None):
         """On the device end to end with many equidistant frequencies (range-compressed values, as
         `summed_at_points` gives them); None (the host-driven search) otherwise or when `device_search` is off."""
+        inputs = self._search_inputs(signal, freqs_hz, tx_m, rx_m, z_m)
+        if inputs is None:
+            return None
+        return search.search_depth(inputs, self.buffers, self.search_profiles, np.asarray(x_m, dtype=np.float64),
+                                   np.asarray(y_m, dtype=np.float64), np.asarray(z_m, dtype=np.float64), plan,
+                                   threshold_db, z_edges_are_grid_edges, _hull(x_m, y_m, z_m, hull_m))
+
+    def coarse_peaks(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, step, hull_m=None):
+        """As `search_depth`, for the coarse ROI's pass: (coarse maximum, its first depth index, samples) or None."""
+        inputs = self._search_inputs(signal, freqs_hz, tx_m, rx_m, z_m)
+        if inputs is None:
+            return None
+        return search.coarse_peaks(inputs, self.buffers, self.search_profiles, np.asarray(x_m, dtype=np.float64),
+                                   np.asarray(y_m, dtype=np.float64), np.asarray(z_m, dtype=np.float64), step,
+                                   _hull(x_m, y_m, z_m, hull_m))
+
+    def _search_inputs(self, signal, freqs_hz, tx_m, rx_m, z_m):
+        """The frame's inputs where the device search applies (many equidistant frequencies, `device_search`)."""
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         if not self.device_search or self._volume_kernel(freqs_hz, "auto") != "range" or len(z_m) < 2:
             return None
-        inputs = self.frames.inputs(signal, freqs_hz, tx_m, rx_m)
-        return search.search_depth(inputs, self.buffers, np.asarray(x_m, dtype=np.float64),
-                                   np.asarray(y_m, dtype=np.float64), np.asarray(z_m, dtype=np.float64), plan,
-                                   threshold_db, z_edges_are_grid_edges)
+        return self.frames.inputs(signal, freqs_hz, tx_m, rx_m)
 
     def _points(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs):
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
@@ -211,3 +228,12 @@ class WarpBackend(Backend):
             for module in (prior_kernels, fsk_kernels):
                 wp.load_module(module=module.__name__, device=self.device)
         self.warmed.add(key)
+
+
+def _hull(x_m, y_m, z_m, hull_m) -> np.ndarray:
+    """Points whose box the search's range profiles cover: `hull_m` (K, 3) where given (one build per frame for the
+    coarse ROI and the search), else the corners of the searched points."""
+    if hull_m is not None:
+        return np.asarray(hull_m, dtype=np.float64).reshape(-1, 3)
+    return np.array([[x, y, z] for x in (np.min(x_m), np.max(x_m)) for y in (np.min(y_m), np.max(y_m))
+                     for z in (np.min(z_m), np.max(z_m))])

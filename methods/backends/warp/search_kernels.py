@@ -40,28 +40,32 @@ def search_coarse(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
                   samples_per_m: wp.float32, m0: wp.float32, profiles: wp.array2d(dtype=wp.vec2h),
                   mag: wp.array2d(dtype=wp.float32), level: wp.array2d(dtype=wp.int32),
                   coarse_max: wp.array(dtype=wp.float32), image_max: wp.array(dtype=wp.float32),
-                  count: wp.array(dtype=wp.int32)):
-    """Coarse samples of pixel p (mag set to -1 elsewhere), its maximum, the image's maximum (image_max zeroed).
-    Every thread of the block writes the same values."""
+                  count: wp.array(dtype=wp.int32), peak_k: wp.array(dtype=wp.int32)):
+    """Coarse samples of pixel p (mag set to -1 elsewhere), its maximum and the first depth index holding it, the
+    image's maximum (image_max zeroed). Every thread of the block writes the same values."""
     p, lane = wp.tid()
     n_z = mag.shape[0]
     for k in range(n_z):
         mag[k, p] = -1.0
     s = wp.min(step[p], wp.max(n_z - 1, 1))
     best = wp.float32(0.0)
+    kb = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     n = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     k = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     while k < n_z:
         v = sample(p, k, lane, xs, ys, z0_m, dz_m, rx, tx, k_carrier, samples_per_m, m0, profiles)
         mag[k, p] = v
         level[k, p] = 0
-        best = wp.max(best, v)
+        if v > best:
+            best = v
+            kb = k
         n += 1
         if k == n_z - 1:
             k = n_z
         else:
             k = wp.min(k + s, n_z - 1)
     coarse_max[p] = best
+    peak_k[p] = kb
     if lane == 0:
         wp.atomic_max(image_max, 0, best)
         wp.atomic_add(count, 0, n)

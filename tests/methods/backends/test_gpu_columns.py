@@ -90,13 +90,13 @@ def test_columns_bp_depth_matches_the_float64_volume(device):
 
     rng = np.random.default_rng()
     freqs_hz = np.array([81.45e9, 82e9])
-    n = 60
+    n = 150
     pts = np.column_stack([rng.uniform(-0.06, 0.06, n), rng.uniform(-0.06, 0.06, n), np.zeros(n)])
     pts[:, 2] = 0.3 + 2.0 * (pts[:, 0] ** 2 + pts[:, 1] ** 2) + rng.uniform(-0.002, 0.002, n)
     k = 2 * np.pi * freqs_hz / C_M_PER_S
     d_rx = np.linalg.norm(pts[:, None] - ANT.rx_m[None], axis=2)
     d_tx = np.linalg.norm(pts[:, None] - ANT.tx_m[None], axis=2)
-    amp = rng.standard_normal(n) + 1j * rng.standard_normal(n)
+    amp = np.exp(2j * np.pi * rng.uniform(size=n))
     signal = np.stack([(amp[:, None] * np.exp(-1j * kf * d_rx)).T @ np.exp(-1j * kf * d_tx) for kf in k], axis=2)
     x_m, y_m = np.linspace(-0.06, 0.06, 9), np.linspace(0.06, -0.06, 9)
     z_m = np.linspace(0.27, 0.35, 41)
@@ -106,6 +106,6 @@ def test_columns_bp_depth_matches_the_float64_volume(device):
     ref = np.abs(_reference_volume(signal, freqs_hz, x_m, y_m, z_m).reshape(len(z_m), len(y_m), len(x_m)))
     ref_depth, ref_proj = peak_depth_m(ref, z_m[0], dz_m)
     kept = ref_proj >= ref_proj.max() * 10 ** (-14 / 20)
-    assert kept.sum() >= 20
+    assert kept.sum() >= 10
     assert np.mean(np.abs(depth_m[kept] - ref_depth[kept]) <= 1e-4) >= 0.999
     assert np.max(np.abs(max_proj - ref_proj)) <= 1e-4 * ref_proj.max()

@@ -61,3 +61,28 @@ def test_host_search_where_the_device_search_does_not_apply():
     plan = bp_search.SearchPlan.every_sample(3)
     assert backend.search_depth(signal, [81.45e9, 82e9], ANT.tx_m, ANT.rx_m, np.zeros(3), np.zeros(3),
                                 np.array([0.3, 0.31]), plan, 14.0, (True, True)) is None
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_device_coarse_roi_equals_the_host_one(device):
+    """bp_search.coarse_roi with the device's coarse pass (Backend.coarse_peaks) finds the host pass's ROI."""
+    from methods.backends import backend_for
+
+    backend = backend_for(device)
+    rng = np.random.default_rng()
+    signal = _scene_frame(rng)
+    xx, yy = np.meshgrid(np.linspace(-0.06, 0.06, 13), np.linspace(0.06, -0.06, 11))
+    pixels = np.ones(xx.shape, dtype=bool)
+    z_m = np.arange(0.24, 0.38, 0.0025)
+
+    def plan_of(x_m, y_m):
+        return bp_search.plan_search(FREQS_HZ, ANT, x_m, y_m, float(z_m[0]), 0.0025, 3.0, 0.02, 1.0)
+
+    def on_device(x_m, y_m, z_c, step):
+        return backend.coarse_peaks(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m, x_m, y_m, z_c, step)
+    evaluate = backend.summed_at_points(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m)
+    host, n_host = bp_search.coarse_roi(evaluate, pixels, xx, yy, z_m, plan_of, 14.0, 3, 2, 3.0, 0.005)
+    got, n_got = bp_search.coarse_roi(evaluate, pixels, xx, yy, z_m, plan_of, 14.0, 3, 2, 3.0, 0.005, on_device)
+    assert n_got == n_host and np.array_equal(got.pixels, host.pixels)
+    assert got.z_min_m == host.z_min_m and got.z_max_m == host.z_max_m
+    assert 0 < host.pixels.sum() < host.pixels.size
