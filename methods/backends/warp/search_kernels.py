@@ -1,9 +1,10 @@
 """Warp kernels of BP's coarse-to-fine depth search on the device (launched by `methods.backends.warp.search`).
 
-The per-pixel rules are `methods.skips.bp_search.search_depth`'s, one block per pixel (SEARCH_BLOCK threads on CUDA
-splitting the receivers of each sample, `range_partial`, summed by a tile reduction and broadcast, so every thread
-takes the same decisions; Warp-CPU runs blocks of one thread), the samples |V| of every pixel in `mag` (n_z, N)
-(-1: not evaluated) and the level that evaluated each in `level`:
+The per-pixel rules are `methods.skips.bp_search.search_depth`'s, one block per pixel (its threads split the (Tx
+chunk, receiver) units of each sample, `range_partial`, and a tile reduction sums and broadcasts the value, so every
+thread takes the same decisions), the samples |V| of every pixel in `mag`
+(-1: not evaluated) and the level that evaluated each in `level`, both (N, n_z) so that a pixel's samples
+share cache lines:
 * `search_coarse`: each pixel's coarse samples (every `step`-th depth and the last), its coarse maximum, and the
   image's coarse maximum (atomic);
 * `search_refine`: the filter-aware skip against the image's coarse maximum, then level by level the candidates
@@ -44,9 +45,9 @@ def search_coarse(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
     """Coarse samples of pixel p (mag set to -1 elsewhere), its maximum and the first depth index holding it, the
     image's maximum (image_max zeroed). Every thread of the block writes the same values."""
     p, lane = wp.tid()
-    n_z = mag.shape[0]
-    for k in range(n_z):
-        mag[k, p] = -1.0
+    n_z = mag.shape[1]
+    for k in range(lane, n_z, wp.block_dim()):     # (the first sample's tile sum orders these before any use)
+        mag[p, k] = -1.0
     s = wp.min(step[p], wp.max(n_z - 1, 1))
     best = wp.float32(0.0)
     kb = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
@@ -54,8 +55,8 @@ def search_coarse(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
     k = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     while k < n_z:
         v = sample(p, k, lane, xs, ys, z0_m, dz_m, rx, tx, k_carrier, samples_per_m, m0, profiles)
-        mag[k, p] = v
-        level[k, p] = 0
+        mag[p, k] = v
+        level[p, k] = 0
         if v > best:
             best = v
             kb = k
@@ -81,12 +82,12 @@ def candidate_ratio(loss_curve_db: wp.array2d(dtype=wp.float32), p: int, spacing
 
 @wp.func
 def first_argmax(mag: wp.array2d(dtype=wp.float32), p: int) -> int:
-    n_z = mag.shape[0]
+    n_z = mag.shape[1]
     kb = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
-    best = mag[0, p]
+    best = mag[p, 0]
     for k in range(1, n_z):
-        if mag[k, p] > best:
-            best = mag[k, p]
+        if mag[p, k] > best:
+            best = mag[p, k]
             kb = k
     return kb
 
@@ -110,7 +111,7 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
     max projection (the coarse maximum where skipped). keep_ratio 0: no filter-aware skip; edge_lo/edge_hi 1 where
     the first/last depth is a grid edge."""
     p, lane = wp.tid()
-    n_z = mag.shape[0]
+    n_z = mag.shape[1]
     spacing = wp.min(step[p], wp.max(n_z - 1, 1))
     window = candidate_ratio(loss_curve_db, p, spacing, margin_db)
     cmax = coarse_max[p]
@@ -124,18 +125,18 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
     n = int(0)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     lvl = int(1)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
     while spacing > 1:
-        best = mag[first_argmax(mag, p), p]
+        best = mag[p, first_argmax(mag, p)]
         threshold = best * window
         spacing = (spacing + 1) // 2
         for k in range(n_z):
-            if mag[k, p] >= threshold and level[k, p] < lvl:
+            if mag[p, k] >= threshold and level[p, k] < lvl:
                 for side in range(2):
                     kk = k - spacing + 2 * side * spacing
                     if kk >= 0 and kk < n_z:
-                        if mag[kk, p] < 0.0:
-                            mag[kk, p] = sample(p, kk, lane, xs, ys, z0_m, dz_m, rx, tx, k_carrier,
+                        if mag[p, kk] < 0.0:
+                            mag[p, kk] = sample(p, kk, lane, xs, ys, z0_m, dz_m, rx, tx, k_carrier,
                                                 samples_per_m, m0, profiles)
-                            level[kk, p] = lvl
+                            level[p, kk] = lvl
                             n += 1
         window = candidate_ratio(loss_curve_db, p, spacing, margin_db)
         lvl += 1
@@ -146,15 +147,15 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
         for side in range(2):
             kk = kb - 1 + 2 * side
             if kk >= 0 and kk < n_z:
-                if mag[kk, p] < 0.0:
-                    mag[kk, p] = sample(p, kk, lane, xs, ys, z0_m, dz_m, rx, tx, k_carrier,
+                if mag[p, kk] < 0.0:
+                    mag[p, kk] = sample(p, kk, lane, xs, ys, z0_m, dz_m, rx, tx, k_carrier,
                                         samples_per_m, m0, profiles)
                     n += 1
                     climbing = 1
     kb = first_argmax(mag, p)
-    db_m = db_of(mag[wp.max(kb - 1, 0), p])
-    db_0 = db_of(mag[kb, p])
-    db_p = db_of(mag[wp.min(kb + 1, n_z - 1), p])
+    db_m = db_of(mag[p, wp.max(kb - 1, 0)])
+    db_0 = db_of(mag[p, kb])
+    db_p = db_of(mag[p, wp.min(kb + 1, n_z - 1)])
     curvature = db_m - wp.float64(2.0) * db_0 + db_p
     offset = wp.float64(0.0)
     if curvature < wp.float64(0.0):
@@ -163,6 +164,6 @@ def search_refine(xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64)
     if (kb == 0 and edge_lo == 0) or (kb == n_z - 1 and edge_hi == 0):
         depth = wp.float64(wp.nan)
     maps[0, p] = depth
-    maps[1, p] = wp.float64(mag[kb, p])
+    maps[1, p] = wp.float64(mag[p, kb])
     if lane == 0:
         wp.atomic_add(count, 0, n)
