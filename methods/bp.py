@@ -131,9 +131,10 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                 x_px, y_px = x_img[pixels], y_img[pixels]
                 plan = (plan_of(x_px, y_px) if skips.bp_coarse_to_fine
                         else bp_search.SearchPlan.every_sample(len(x_px)))
-                found_depth = None if use_range else backend.search_depth(
+                on_device = None if use_range else backend.search_depth(
                     signal, freqs_hz, antennas.tx_m, antennas.rx_m, x_px, y_px, z_m, plan, threshold_db, z_edges,
                     hull_m)
+                found_depth = None if on_device is None else bp_search.SearchResult(*on_device)
                 if found_depth is None:
                     found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges)
                 depth_m[pixels], max_proj[pixels] = found_depth.depth_m, found_depth.max_projection

@@ -72,9 +72,9 @@ class Backend:
 
     def search_depth(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, plan, threshold_db, z_edges_are_grid_edges,
                      hull_m=None):
-        """BP's coarse-to-fine search (`methods.skips.bp_search.search_depth`) where the data lives, as a
-        SearchResult, or None where this backend leaves it to the host-driven search. `hull_m` (K, 3): points
-        whose box holds every point a frame's calls search (tables built once per frame)."""
+        """BP's coarse-to-fine search (`methods.skips.bp_search.search_depth`, `plan` its SearchPlan) where the data
+        lives: (depth_m, max projection, samples evaluated), or None where this backend leaves it to the host.
+        `hull_m` (K, 3): points whose box holds every point a frame's calls search (tables built once per frame)."""
         return None
 
     def coarse_peaks(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, step, hull_m=None):

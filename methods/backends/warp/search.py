@@ -10,7 +10,6 @@ import warp as wp
 from methods.backends.warp import search_kernels
 from methods.backends.warp.correlation import range_profiles
 from methods.backends.warp.frames import BufferPool, FrameInputs
-from methods.skips.bp_search import SearchPlan, SearchResult
 
 
 class FrameProfiles:
@@ -69,11 +68,13 @@ def coarse_peaks(inputs: FrameInputs, buffers: BufferPool, profiles: FrameProfil
 
 
 def search_depth(inputs: FrameInputs, buffers: BufferPool, profiles: FrameProfiles, x_m: np.ndarray,
-                 y_m: np.ndarray, z_m: np.ndarray, plan: SearchPlan, threshold_db: float | None,
-                 z_edges_are_grid_edges: tuple[bool, bool], hull_m: np.ndarray) -> SearchResult:
+                 y_m: np.ndarray, z_m: np.ndarray, plan, threshold_db: float | None,
+                 z_edges_are_grid_edges: tuple[bool, bool], hull_m: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, int]:
     """As `bp_search.search_depth` for the pixels (x_m, y_m) (N,) over the equidistant depths z_m, with the
-    frame's range-compressed values (many equidistant frequencies); profiles over the box of `hull_m` (K, 3), which
-    must hold the points."""
+    frame's range-compressed values (many equidistant frequencies): (depth_m, max projection, samples evaluated);
+    `plan` a `bp_search.SearchPlan` (step, loss_curve_db, margin_db); profiles over the box of `hull_m` (K, 3),
+    which must hold the points."""
     dev = inputs.device
     gather_args = profiles.args(inputs, *np.asarray(hull_m).T)
     state = _coarse(inputs, buffers, gather_args, x_m, y_m, z_m, plan.step)
@@ -86,4 +87,4 @@ def search_depth(inputs: FrameInputs, buffers: BufferPool, profiles: FrameProfil
                     + gather_args + [state[k] for k in ("mag", "level", "coarse_max", "image_max", "count")]
                     + [maps], device=dev)
     host = maps.numpy()
-    return SearchResult(host[0].copy(), host[1].copy(), int(state["count"].numpy()[0]))
+    return host[0].copy(), host[1].copy(), int(state["count"].numpy()[0])

@@ -44,7 +44,8 @@ def test_device_search_equals_the_host_search(device, threshold_db, z_edges):
     assert plan.step.max() > 1
     host = bp_search.search_depth(backend.summed_at_points(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m), x_m, y_m, z_m,
                                   plan, threshold_db, z_edges)
-    got = backend.search_depth(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m, x_m, y_m, z_m, plan, threshold_db, z_edges)
+    got = bp_search.SearchResult(*backend.search_depth(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m, x_m, y_m, z_m, plan,
+                                                       threshold_db, z_edges))
     assert np.array_equal(np.isnan(got.depth_m), np.isnan(host.depth_m))
     valid = np.isfinite(host.depth_m)
     assert valid.sum() >= 8
