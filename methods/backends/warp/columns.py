@@ -15,9 +15,9 @@ at the float32 floor); TERM_TOL = 1e-4 keeps the image within 1e-4 of the float6
 
 Cost: per voxel and frequency one receive phasor and one 4-tap lookup per receiver and table column (QAR50:
 2 x 94) plus the directly taken transmitters, against 94 x 94 pair terms; the tables cost rows x F x R x T x n_rho
-multiply-adds. Measured on the H100 (paper grid, two frequencies): 69 ms for the volume against 38 ms for the
-tensor-core kernel, whose fp16 operands err by ~1.6e-4; so the tensor cores stay the default there and this kernel
-is the accurate alternative (`volume(..., method="columns")`).
+multiply-adds. Measured on the H100 (paper grid, two frequencies, volume + peak): 65 ms against 37 ms for the
+tensor-core kernel, whose fp16 operands err by ~1.8e-4; so the tensor cores stay the default there and this kernel
+is the accurate alternative (`volume(..., method="columns")`; docs/measurements/formation.md).
 """
 from __future__ import annotations
 
