@@ -148,7 +148,7 @@ def search_rows(backend, antennas, n_xy: int, n_z: int, n_frames: int, rng) -> l
             spent.append((time.perf_counter() - start) * 1e3)
             return out
         return run
-    device_search, host_search = backend.search_depth, bp_search.search_depth
+    default_on, device_search, host_search = backend.device_search, backend.search_depth, bp_search.search_depth
     backend.search_depth, bp_search.search_depth = timing(device_search), timing(host_search)
     try:
         for i, frame in enumerate(frames):
@@ -163,7 +163,7 @@ def search_rows(backend, antennas, n_xy: int, n_z: int, n_frames: int, rng) -> l
                     search_ms[on].append(sum(spent))
                 results[on].append(rec)
     finally:
-        backend.device_search = True
+        backend.device_search = default_on
         del backend.search_depth
         bp_search.search_depth = host_search
     both = [np.isfinite(a.depth_m) & np.isfinite(b.depth_m) for a, b in zip(results[True], results[False],

@@ -1,6 +1,7 @@
 """BP's coarse-to-fine search on a Warp device end to end (methods.backends.warp.search) against the host-driven
 search (methods.skips.bp_search.search_depth) over the same range-compressed values: same depths (to float32
-rounding of the gather's sample positions), same skipped and cut pixels, same number of samples evaluated."""
+rounding of the gather's sample positions), same skipped and cut pixels, same number of samples evaluated. The
+device search is switched on for the test where it is off by default (Warp-CPU)."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,6 +15,25 @@ from devices import CUDA
 
 ANT = load_antenna_array()
 FREQS_HZ = np.linspace(72e9, 82e9, 128)[40:72]       # 32 equidistant frequencies: the range-compressed path
+
+
+def _searching(device):
+    """The backend of `device` with its device search on (restored by the caller's fixture)."""
+    from methods.backends import backend_for
+
+    backend = backend_for(device)
+    backend.device_search = True
+    return backend
+
+
+@pytest.fixture(autouse=True)
+def _restore_device_search():
+    from methods.backends import backend_for
+
+    yield
+    for device in ("warp-cpu",):
+        backend = backend_for(device)
+        backend.device_search = not backend.device.is_cpu
 
 
 def _scene_frame(rng):
@@ -32,9 +52,7 @@ def _scene_frame(rng):
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 @pytest.mark.parametrize("threshold_db, z_edges", [(14.0, (True, False)), (None, (True, True))])
 def test_device_search_equals_the_host_search(device, threshold_db, z_edges):
-    from methods.backends import backend_for
-
-    backend = backend_for(device)
+    backend = _searching(device)
     rng = np.random.default_rng()
     signal = _scene_frame(rng)
     xx, yy = np.meshgrid(np.linspace(-0.06, 0.06, 9), np.linspace(0.06, -0.06, 7))
@@ -57,7 +75,8 @@ def test_device_search_equals_the_host_search(device, threshold_db, z_edges):
 def test_host_search_where_the_device_search_does_not_apply():
     from methods.backends import backend_for
 
-    backend = backend_for("warp-cpu")
+    assert not backend_for("warp-cpu").device_search           # off by default on Warp-CPU (module doc)
+    backend = _searching("warp-cpu")                             # two frequencies: no range compression
     signal = np.ones((94, 94, 2), dtype=np.complex64)
     plan = bp_search.SearchPlan.every_sample(3)
     assert backend.search_depth(signal, [81.45e9, 82e9], ANT.tx_m, ANT.rx_m, np.zeros(3), np.zeros(3),
@@ -67,9 +86,7 @@ def test_host_search_where_the_device_search_does_not_apply():
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 def test_device_coarse_roi_equals_the_host_one(device):
     """bp_search.coarse_roi with the device's coarse pass (Backend.coarse_peaks) finds the host pass's ROI."""
-    from methods.backends import backend_for
-
-    backend = backend_for(device)
+    backend = _searching(device)
     rng = np.random.default_rng()
     signal = _scene_frame(rng)
     xx, yy = np.meshgrid(np.linspace(-0.06, 0.06, 13), np.linspace(0.06, -0.06, 11))
