@@ -10,11 +10,11 @@ a per-pixel prior image (ny, nx) samples each pixel at prior + k dz, |k dz| <= b
 and pixels without a prior stay NaN.
 
 Region of interest and skips (methods.skips.roi, methods.skips.settings): with an ROI, only its pixels and depths are
-evaluated
-(the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device, through
-the point kernels) and, on the CPU with many frequencies, on range-compressed profiles (methods.skips.bp_search,
-methods.backends.cpu_range). With no ROI and no skip
-(`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
+evaluated (the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device,
+through the point kernels) and, on the CPU with many frequencies, on range-compressed profiles
+(methods.skips.bp_search, methods.backends.cpu_range); with many frequencies on CUDA the coarse ROI's pass and the
+whole search run on the device (`Backend.coarse_peaks`, `Backend.search_depth`: same rules and results). With no ROI
+and no skip (`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
 from __future__ import annotations
 
