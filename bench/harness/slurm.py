@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 import time
@@ -46,6 +47,7 @@ from bench.harness.slurm_resources import job_mem_gb
 from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
 
+SLURM_NEEDED = ("sbatch", "srun", "squeue", "scancel")   # submit, submitit's job script, wait, cancel
 LOCAL_PREFIXES = ("/tmp", "/var/tmp", "/dev/shm", "/run")
 LOCAL_FS_TYPES = {"tmpfs", "ramfs", "devtmpfs"}
 POLL_S = 2.0
@@ -81,6 +83,16 @@ def _mount_type(path: Path) -> str:
     except OSError:
         return ""
     return kind
+
+
+def check_slurm_commands(launcher: str) -> None:
+    """One error line (exit 2) before anything is prepared where SLURM's commands are not on PATH (a machine that
+    is not a SLURM submit host): which are missing, and how to run the sweep here instead."""
+    missing = [command for command in SLURM_NEEDED if shutil.which(command) is None]
+    if missing:
+        cli.fail(f"hydra/launcher={launcher}: SLURM's {', '.join(missing)} not found on PATH (this machine is not a "
+                 "SLURM submit host); run the sweep on this machine with hydra/launcher=local (parallel jobs) or "
+                 "without hydra/launcher (one job after another)")
 
 
 def check_shared(path: Path, what: str) -> None:
@@ -246,6 +258,7 @@ class CheckedSlurmLauncher(SlurmLauncher):
     def launch(self, job_overrides, initial_job_idx: int) -> list[JobReturn]:
         import submitit
 
+        check_slurm_commands(self.config.hydra.runtime.choices.get("hydra/launcher") or "slurm")
         paths = self._paths()
         try:
             for key, path in paths.items():
