@@ -27,7 +27,16 @@ from methods.skips.roi import dilate, full_roi, roi_from_mask_bb
 from methods.skips.settings import ALL, NONE, SkipSettings, default_for, resolve
 
 from devices import CUDA
-from methods_scenes import ANTENNAS, MAROON_FREQS_HZ, TABLE1_FREQS_HZ, add_noise, make_capture, plate_points_m, simulate
+from methods_scenes import (
+    ANTENNAS,
+    MAROON_FREQS_HZ,
+    TABLE1_FREQS_HZ,
+    add_noise,
+    make_capture,
+    parabola_depth_bound_m,
+    plate_points_m,
+    simulate,
+)
 
 GRID = RadarGrid((-0.02, -0.02, 0.27), (0.02, 0.02, 0.35), (21, 21, 81))        # 2 mm pixels, 1 mm depth steps
 SCATTERERS_M = np.array([[0.004, -0.006, 0.300], [-0.010, 0.008, 0.318], [0.012, 0.010, 0.290]])
@@ -200,7 +209,13 @@ def test_point_targets_reconstruct_where_they_are_with_every_skip(scene):
         rec = reconstruct(scene, "bp", config, roi="all")
         none = reconstruct(scene, "bp", config, roi="none")
         same(np.isfinite(rec.depth_m), np.isfinite(none.depth_m))
-        np.testing.assert_allclose(rec.depth_m[rec.valid], none.depth_m[none.valid], atol=1e-7)
+        # the two paths sum the same phasors in another order (float32): bounded per pixel by the parabola's
+        # sensitivity (a fixed 1e-7 m was missed by 1.4e-7 m on one pixel of another machine); d10's bounds are
+        # ~1 um, d05's ~50 um (0.55 GHz apart, its depth profile is flat over a 1 mm step)
+        indices = config_indices(TABLE1_FREQS_HZ, config)
+        bound_m = parabola_depth_bound_m(scene.radar.signal[:, :, indices], TABLE1_FREQS_HZ[indices], GRID)[rec.valid]
+        assert np.all(np.abs(rec.depth_m[rec.valid] - none.depth_m[none.valid]) <= bound_m)
+        assert np.median(bound_m) < 0.1 * (GRID.z_m[1] - GRID.z_m[0])      # a shift by one depth step still fails
         row, col = np.unravel_index(np.nanargmax(rec.magnitude), GRID.image_shape)
         assert (GRID.x_m[col], GRID.y_m[::-1][row]) == pytest.approx((0.004, -0.006), abs=1.1e-3)
         assert rec.depth_m[row, col] == pytest.approx(0.300, abs=0.5e-3)
