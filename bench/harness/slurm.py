@@ -43,6 +43,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from submitit.core.utils import FailedJobError, UncompletedJobError
 
 from bench import cli
+from bench.harness import validate
 from bench.harness.slurm_resources import job_mem_gb
 from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
@@ -288,6 +289,10 @@ class CheckedSlurmLauncher(SlurmLauncher):
         for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
             overrides = [*overrides, *absolute]
             cfg = self.hydra_context.config_loader.load_sweep_config(self.config, overrides)
+            try:
+                validate.check(cfg, memory=False)        # the nodes' memory is not this machine's
+            except cli.UserError as err:
+                cli.fail(str(err))
             with open_dict(cfg.hydra.job):
                 cfg.hydra.job.num = idx          # the job folder's name (hydra.sweep.subdir) needs it
             cell = cfg.hydra.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
