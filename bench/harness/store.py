@@ -45,6 +45,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from bench.harness import atomic
 from bench.harness.codeversion import code_version  # noqa: F401 -- part of a cell's key (bench.harness.app)
 from bench.maroon import reader as maroon
 from bench.maroon import safe_io
@@ -79,18 +80,6 @@ def _sha256_file(path: Path, roots: tuple[Path, ...] | None = None) -> tuple[str
 def _stamp(path: Path, info: os.stat_result) -> bytes:
     return (f"{os.path.realpath(path)}\0{info.st_dev}\0{info.st_ino}\0{info.st_size}\0{info.st_mtime_ns}\0"
             f"{info.st_ctime_ns}").encode()
-
-
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    """`data` into `path` through a temp file and `os.replace`: `path` is the old file or the new one, never a part;
-    on a failed write (full disk, file-size limit, folder gone) the temp file is removed and the OSError raised."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    except OSError as err:
-        tmp.unlink(missing_ok=True)
-        raise OSError(f"{path}: cannot write ({err.strerror or err}); nothing was kept") from None
 
 
 def capture_files(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
@@ -137,7 +126,7 @@ class Store:
         settled = time.time_ns() - max(after.st_mtime_ns, after.st_ctime_ns) > RACY_S * 1e9
         if unchanged and settled:
             cached.parent.mkdir(parents=True, exist_ok=True)
-            _atomic_write_bytes(cached, digest.encode())
+            atomic.write_bytes(cached, digest.encode())
             self._digests[stamp] = digest
         return digest
 
@@ -209,8 +198,8 @@ class Store:
         image = io.BytesIO()
         with h5py.File(image, "w") as h5:
             _fill(h5, "/", arrays, attrs)
-        _atomic_write_bytes(self.cells / f"{key}.h5", image.getvalue())
-        _atomic_write_bytes(self.cells / f"{key}.json", json.dumps(row, default=float).encode())
+        atomic.write_bytes(self.cells / f"{key}.h5", image.getvalue())
+        atomic.write_bytes(self.cells / f"{key}.json", json.dumps(row, default=float).encode())
 
     def copy_arrays(self, key: str, path: Path, group: str, attrs: dict) -> None:
         """Add (or replace) `group` in the HDF5 file `path` holding the cell's arrays as `write_arrays` writes
