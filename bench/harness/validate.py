@@ -106,10 +106,11 @@ def _memory(cfg: DictConfig) -> None:
         return
     need_mib = job_peak_mib(cfg, captures=1)
     if need_mib > total_mib:
-        grid = OmegaConf.to_container(cfg.grid.override) if cfg.grid.get("override") else cfg.grid.name
-        raise cli.UserError(f"grid={_show(grid)}", f"{cfg.method.name} on this grid needs about "
-                                                   f"{need_mib / 1024:.1f} GiB (bench.harness.slurm_resources), this "
-                                                   f"machine has {total_mib / 1024:.1f} GiB: use a smaller grid")
+        grid = cfg.grid.get("override") or {"nxy": "301", "nz": "201"}      # the model's default grid
+        raise cli.UserError(f"grid={cfg.grid.name}", f"{cfg.method.name} on its {grid['nxy']} x {grid['nxy']} x "
+                                                     f"{grid['nz']} grid needs about {need_mib / 1024:.1f} GiB "
+                                                     "(bench.harness.slurm_resources), this machine has "
+                                                     f"{total_mib / 1024:.1f} GiB: use a smaller grid")
 
 
 def _dataset(cfg: DictConfig) -> None:
