@@ -179,7 +179,7 @@ def check_launcher(launcher: DictConfig) -> None:
         cpus = os.cpu_count() or 1
         n_jobs = number("hydra.launcher.n_jobs", launcher.n_jobs, -cpus, math.inf, whole=True)
         if n_jobs == 0:
-            _fail("hydra.launcher.n_jobs", 0, f"a whole number >= 1, or -1 ... -{cpus} (every CPU ... one)")
+            _fail("hydra.launcher.n_jobs", 0, f"a whole number >= 1, or -1 (every CPU) ... -{cpus} (one worker)")
     elif target.endswith("SlurmLauncher"):
         number("hydra.launcher.timeout_min", launcher.timeout_min, 0, math.inf, whole=True)
         number("hydra.launcher.cpus_per_task", launcher.cpus_per_task, 1, math.inf, whole=True)

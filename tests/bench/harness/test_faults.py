@@ -426,3 +426,18 @@ def test_the_code_version_follows_the_import_graph_of_the_compute_path(tmp_path)
     assert sorted(compute_modules(root=tmp_path)) == ["bench", "bench.harness", "bench.harness.app",
                                                       "bench.harness.grids", "bench.other", "methods", "methods.lazy",
                                                       "methods.named"]
+
+
+def test_an_arrays_h5_cut_by_a_killed_run_is_written_anew(tmp_path, caplog):
+    from bench.harness.store import write_arrays
+
+    path = tmp_path / "arrays.h5"
+    values = {"depth_m": np.full((5, 4), 0.3), "magnitude": np.ones((5, 4)), "gt_depth_m": np.zeros((5, 4))}
+    for group in ("a", "b"):
+        write_arrays(path, group, values)
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])            # killed while writing
+    with caplog.at_level(logging.WARNING, logger="bench"):
+        write_arrays(path, "c", values)
+    assert any(f"{path} is not a readable HDF5 file" in r.getMessage() for r in caplog.records)
+    with h5py.File(path, "r") as h5:
+        assert list(h5) == ["c"] and (h5["c/depth_m"][()] == 0.3).all()
