@@ -441,3 +441,11 @@ def test_an_arrays_h5_cut_by_a_killed_run_is_written_anew(tmp_path, caplog):
     assert any(f"{path} is not a readable HDF5 file" in r.getMessage() for r in caplog.records)
     with h5py.File(path, "r") as h5:
         assert list(h5) == ["c"] and (h5["c/depth_m"][()] == 0.3).all()
+
+
+def test_a_depth_window_reaching_behind_the_radar_is_one_line_naming_the_capture(root, tmp_path):
+    cfg = _cfg(*_overrides(root, None, "grid=coarse", "grid.override.z_half_m=0.5"))
+    validate.check(cfg)                                   # within range; too deep only for a capture at 30 cm
+    with pytest.raises(cli.UserError, match=r"^grid.override.z_half_m=0.5: must be below the distance of capture "
+                                            r"01_plate/30 \(0.3 m\): the depth window would reach behind the radar"):
+        run(cfg, tmp_path / "out")
