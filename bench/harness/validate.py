@@ -74,7 +74,7 @@ def _frequencies(cfg: DictConfig) -> None:
     f_ghz = cfg.freq.f_ghz
     if f_ghz is None:
         return
-    if not isinstance(f_ghz, ListConfig) or len(f_ghz) == 0:
+    if not isinstance(f_ghz, (list, ListConfig)) or len(f_ghz) == 0:      # the freq_ghz resolver gives a list
         _fail("freq.f_ghz", f_ghz, "null (every frequency) or a list of frequencies in GHz")
     values = [number("freq.f_ghz", f, 0.0, math.inf, low_open=True) for f in f_ghz]
     if len(set(values)) != len(values):
