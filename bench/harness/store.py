@@ -117,7 +117,8 @@ class Store:
         if stamp in self._digests:
             return self._digests[stamp]
         cached = self.root / "digests" / hashlib.sha256(stamp).hexdigest()[:32]
-        if cached.is_file() and _SHA256_HEX.fullmatch(text := cached.read_text(errors="replace")):
+        text = _read_digest(cached, self._roots())
+        if text is not None:
             self._digests[stamp] = text
             return text
         digest, hashed = _sha256_file(path, roots=())
@@ -213,6 +214,17 @@ class Store:
 
         with self._open_cell(key) as source:
             _update_h5(Path(path), add)
+
+
+def _read_digest(path: Path, roots: tuple[Path, ...]) -> str | None:
+    """A cached digest: the sha256 hex in the regular file `path` inside `roots` (at most 65 bytes read), else None
+    (missing or not one: the file is hashed again and the entry rewritten)."""
+    try:
+        with safe_io.open_checked(path, "text", roots) as (handle, _):
+            text = handle.read(65).decode("ascii", errors="replace")
+    except DatasetError:
+        return None
+    return text if _SHA256_HEX.fullmatch(text) else None
 
 
 def _type_names(kind) -> str:

@@ -80,7 +80,13 @@ def root(synth_capture, tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def reference(root, tmp_path_factory):
+def dataset_digest(root):
+    """The dataset's bytes before any fault (the last test compares)."""
+    return tree_digest(root)
+
+
+@pytest.fixture(scope="module")
+def reference(root, dataset_digest, tmp_path_factory):
     """A clean run (rows, depth PNGs) and its filled store, to compare every recovery with."""
     base = tmp_path_factory.mktemp("faults_reference")
     rows = run(_cfg(*_overrides(root, base / "store")), base / "out")
@@ -449,3 +455,7 @@ def test_a_depth_window_reaching_behind_the_radar_is_one_line_naming_the_capture
     with pytest.raises(cli.UserError, match=r"^grid.override.z_half_m=0.5: must be below the distance of capture "
                                             r"01_plate/30 \(0.3 m\): the depth window would reach behind the radar"):
         run(cfg, tmp_path / "out")
+
+
+def test_the_dataset_is_unchanged_by_every_fault_above(root, dataset_digest):
+    assert tree_digest(root) == dataset_digest
