@@ -136,6 +136,8 @@ DOC_RUNS: dict[str, list[str]] = {
     ".venv/bin/python -m bench.perf fill --root data/synthetic":
         ["{py} -m bench.perf fill --help"],            # minutes on the CPU; its parts run in test_perf_fill
     "python -m bench.perf fill --root DIR": ["{py} -m bench.perf fill --help"],
+    ".venv/bin/python -m bench.perf formation --device cuda --frames 8":
+        ["{py} -m bench.perf formation --help"],       # needs a GPU; its parts run in test_perf_formation
     ".venv/bin/python -m bench.perf stream [--device cpu|cuda] [--root DIR --capture OBJECT/DISTANCE]":
         ["{py} -m bench.perf stream --help"],          # generates a 10-frame sequence; runs in test_perf_stream
     ".venv/bin/python -m bench.perf overhead --root data/synthetic [--device cpu|cuda] [--grid paper]":
