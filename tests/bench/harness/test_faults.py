@@ -415,6 +415,8 @@ def test_inspect_names_the_file_of_a_5000_digit_count(root, tmp_path):
 
 
 def test_the_code_version_follows_the_import_graph_of_the_compute_path(tmp_path):
+    import grimp
+
     from bench.harness.codeversion import compute_modules
 
     modules = compute_modules()
@@ -422,6 +424,10 @@ def test_the_code_version_follows_the_import_graph_of_the_compute_path(tmp_path)
                    "methods.bp", "methods.mm2fsk", "methods.backends.cpu", "metrics.evaluate"):
         assert needed in modules, needed
     assert not [name for name in modules if name.startswith(("bench.report", "bench.perf", "tests"))]
+    # import-linter's graph (grimp, a test dependency): every module it finds upstream is covered
+    graph = grimp.build_graph("bench", "methods", "metrics", cache_dir=None)
+    assert graph.find_upstream_modules("bench.harness.app") <= set(modules)
+    assert "methods.bp" not in graph.find_upstream_modules("bench.harness.app")   # named in registry.BUILTIN only
     tree = {"bench/__init__.py": "", "bench/harness/__init__.py": "", "methods/__init__.py": "",
             "bench/harness/app.py": "from . import grids\ndef f():\n    import methods.lazy\n",
             "bench/harness/grids.py": "from ..other import thing\nTABLE = {'bp': 'methods.named.Class'}\n",
