@@ -3,6 +3,8 @@
 `hydra/launcher=slurm_cpu` / `slurm_gpu` (configs/hydra/launcher/) use `CheckedSlurmLauncher`, which, in the
 submitting process and before anything is submitted:
 
+* ends in one line where SLURM's commands are not on PATH (a machine without SLURM), and where any job's setting
+  is out of range (bench.harness.validate), before any data is prepared;
 * checks that the sweep directory, the store, the dataset root and submitit's folder are absolute-able paths on a
   file system the nodes can share (not /tmp, /var/tmp, /dev/shm, /run or a tmpfs: a node's private disk), unless
   `BENCH_SLURM_LOCAL_PATHS=1` (a single-node cluster); the jobs get them as absolute paths, so a job that starts in
@@ -267,6 +269,10 @@ class CheckedSlurmLauncher(SlurmLauncher):
                 check_shared(path, key)
         except cli.UserError as err:
             cli.fail(str(err))
+        absolute = [f"hydra.sweep.dir={paths['hydra.sweep.dir']}", f"dataset.root={paths['dataset.root']}"]
+        if "store.dir" in paths:
+            absolute.append(f"store.dir={paths['store.dir']}")
+        job_configs = self._job_configs(job_overrides, initial_job_idx, absolute)
         self._prepare_data()
         if "store.dir" in paths:
             os.environ.setdefault("WARP_CACHE_PATH", str(paths["store.dir"] / "warp-cache"))
@@ -282,20 +288,9 @@ class CheckedSlurmLauncher(SlurmLauncher):
             print(f"cpus_per_task={cpus} is more than a node of the partition has ({available}): using {available}",
                   flush=True)
             cpus = available
-        absolute = [f"hydra.sweep.dir={paths['hydra.sweep.dir']}", f"dataset.root={paths['dataset.root']}"]
-        if "store.dir" in paths:
-            absolute.append(f"store.dir={paths['store.dir']}")
         paths["hydra.sweep.dir"].mkdir(parents=True, exist_ok=True)
         jobs, self._mem_gb = [], {}
-        for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
-            overrides = [*overrides, *absolute]
-            cfg = self.hydra_context.config_loader.load_sweep_config(self.config, overrides)
-            try:
-                validate.check(cfg, memory=False)        # the nodes' memory is not this machine's
-            except cli.UserError as err:
-                cli.fail(str(err))
-            with open_dict(cfg.hydra.job):
-                cfg.hydra.job.num = idx          # the job folder's name (hydra.sweep.subdir) needs it
+        for idx, overrides, cfg in job_configs:
             cell = cfg.hydra.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
             captures = len(cfg.dataset.captures) if cfg.dataset.captures is not None else _count(paths)
             timeout = int(self.params.get("timeout_min") or 0) or time_limit_min(cfg, captures)
@@ -318,6 +313,23 @@ class CheckedSlurmLauncher(SlurmLauncher):
         if missing:
             self._report_missing(missing)
         return returns
+
+    def _job_configs(self, job_overrides, initial_job_idx: int, absolute: list[str]
+                     ) -> list[tuple[int, list, DictConfig]]:
+        """(job number, overrides, configuration) of every job, each checked (bench.harness.validate) before any
+        data is prepared or any job submitted: one line and exit 2 for the first setting out of range."""
+        configs = []
+        for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
+            overrides = [*overrides, *absolute]
+            cfg = self.hydra_context.config_loader.load_sweep_config(self.config, overrides)
+            try:
+                validate.check(cfg, memory=False)        # the nodes' memory is not this machine's
+            except cli.UserError as err:
+                cli.fail(str(err))
+            with open_dict(cfg.hydra.job):
+                cfg.hydra.job.num = idx          # the job folder's name (hydra.sweep.subdir) needs it
+            configs.append((idx, overrides, cfg))
+        return configs
 
     def _wait(self, jobs) -> tuple[list[JobReturn], list[tuple[str, str]]]:
         """Results of the jobs that finished, and (cell, cause) of those that did not."""

@@ -232,3 +232,23 @@ def test_the_slurm_path_on_a_single_node_cluster(accounting):
                        timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.count("ok: ") == 18, proc.stdout
+
+
+def test_a_jobs_absurd_setting_is_one_line_before_anything_is_submitted(tmp_path):
+    """Each job's configuration is checked (bench.harness.validate) before sbatch sees it; fakes of every SLURM
+    command the launcher touches, sbatch's leaving a mark if it is called."""
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "sbatch").write_text(f'#!/bin/sh\ntouch {tmp_path / "sbatch-called"}\necho "Submitted batch job 7"\n')
+    (fake / "sinfo").write_text("#!/bin/sh\necho 16\n")
+    for name in ("srun", "squeue", "scancel"):
+        (fake / name).write_text("#!/bin/sh\nexit 0\n")
+    for tool in fake.iterdir():
+        tool.chmod(0o755)
+    env = {**os.environ, "PATH": f"{fake}:{os.environ['PATH']}", "BENCH_SLURM_LOCAL_PATHS": "1"}
+    proc = subprocess.run([sys.executable, "-m", "bench", "-m", "hydra/launcher=slurm_cpu", "cell=mm2fsk_d10",
+                           "threshold_db=14,-3", "dataset=maroon", f"dataset.root={tmp_path}",
+                           f"hydra.sweep.dir={tmp_path / 'sweep'}", f"store.dir={tmp_path / 'store'}"],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
+    assert proc.returncode == 2 and proc.stderr == "error: threshold_db=-3: must be a number >= 0 and <= 1529.23\n"
+    assert not (tmp_path / "sbatch-called").exists()
