@@ -36,7 +36,9 @@ def group_columns(rows: pd.DataFrame) -> list[str]:
 
 def _failure_reason(rows: pd.DataFrame, floor_pct: float) -> pd.Series:
     """Per result row: why it is not a success ('' for a success)."""
-    failure = rows["failure"].fillna("").astype(str) if "failure" in rows else pd.Series("", index=rows.index)
+    # astype(object) first: an all-NaN column reads back as float64, which fillna("") will refuse in pandas 4
+    failure = (rows["failure"].astype(object).fillna("").astype(str) if "failure" in rows
+               else pd.Series("", index=rows.index))
     undefined = ~rows[METRICS_CM].notna().all(axis=1)
     reason = failure.where(failure != "", np.where(undefined, "metric undefined", ""))
     if "coverage_pct" in rows:

@@ -136,6 +136,20 @@ DOC_RUNS: dict[str, list[str]] = {
     ".venv/bin/python -m bench.perf fill --root data/synthetic":
         ["{py} -m bench.perf fill --help"],            # minutes on the CPU; its parts run in test_perf_fill
     "python -m bench.perf fill --root DIR": ["{py} -m bench.perf fill --help"],
+    ".venv/bin/python -m bench.report.tables table2|table3|beyond|runtime [--results DIR|CSV] [--csv FILE] [--coverage-floor PCT]":
+        ["{py} -m bench.report.tables table3 --coverage-floor 50 --csv {tmp}/t3f.csv", "test -s {tmp}/t3f_pairs.csv"],
+    ".venv/bin/python -m bench.report SWEEP_ROOT [SWEEP_ROOT ...] [--out FILE] [--no-pictures]":
+        ["{py} -m bench.report --help"],             # the report of a sweep runs in REPORT_RUN
+    ".venv/bin/python -m bench.report.agreement --from-results DIR [--faithful-results DIR2] [--data ROOT] [--out DIR]":
+        ["{py} -m bench.report.agreement --help"],
+    # regenerating results/: the demo and the faithful sweeps take minutes to hours; their options are checked
+    ".venv/bin/python -m bench.demo --update-results": ["{py} -m bench.demo --help"],
+    ".venv/bin/python -m bench -m experiment=table2 profile=faithful hydra/launcher=basic hydra.sweep.dir=outputs/faithful/table2":
+        ["{py} -m bench experiment=table2 profile=faithful hydra/launcher=basic --cfg job"],
+    ".venv/bin/python -m bench -m experiment=table3 profile=faithful hydra/launcher=basic hydra.sweep.dir=outputs/faithful/table3":
+        ["{py} -m bench experiment=table3 profile=faithful hydra/launcher=basic --cfg job"],
+    ".venv/bin/python -m bench.report.agreement --from-results results --faithful-results outputs/faithful --data data/synthetic --out results":
+        ["{py} -m bench.report.agreement --help"],
     ".venv/bin/python -m bench.perf formation --device cuda --frames 8":
         ["{py} -m bench.perf formation --help"],       # needs a GPU; its parts run in test_perf_formation
     ".venv/bin/python -m bench.perf stream [--device cpu|cuda] [--root DIR --capture OBJECT/DISTANCE]":
