@@ -27,6 +27,7 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
+from bench.harness import validate
 from bench.harness.grids import grid_for
 from bench.harness.results import ResultsCsv, write_depth
 from bench.harness.sizing import sweep_jobs, timing_mode
@@ -389,6 +390,7 @@ def main(cfg: DictConfig) -> None:
     _isolate_warp_cache()
     try:
         cli.resolve_device(str(cfg.device), option="device=")   # before generating or reading anything
+        validate.check(cfg)                                       # every setting in its range (one line if not)
         if cfg.store.dir is not None:
             cli.check_creatable_dir(to_absolute_path(str(cfg.store.dir)), f"store.dir={cfg.store.dir}")
         started = time.perf_counter()
