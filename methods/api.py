@@ -178,7 +178,7 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     backend = backend_for(device)
     skips = resolve(roi, method.name, len(indices), backend.dense_beats_search)
     grid = grid or frame.grid
-    signal = frame.signal.take(indices, axis=2)          # a new C-contiguous array: ~3x faster than fancy indexing
+    signal = np.take(frame.signal, indices, axis=2)      # a new C-contiguous array: ~3x faster than fancy indexing
     _check_signal(capture, signal)
     freqs_hz = frame.freqs_hz[indices]
     antennas = capture.antennas
