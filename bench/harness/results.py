@@ -4,6 +4,7 @@ from __future__ import annotations
 import functools
 import json
 import os
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -119,3 +120,24 @@ class ResultsCsv:
             os.write(descriptor, line)
         finally:
             os.close(descriptor)
+
+
+class BackgroundWriter:
+    """Output files written on one background thread, in the order given, while the caller computes the next
+    capture (PNG compression, HDF5 and file writes release the interpreter lock). `close` waits for them; the first
+    error a write raised is raised by the next `submit` or by `close`, so a failed write still fails the run."""
+
+    def __init__(self):
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="outputs")
+        self._pending: list[Future] = []
+
+    def submit(self, function, *args) -> None:
+        self._pending = [future for future in self._pending if not (future.done() and future.result() is None)]
+        self._pending.append(self._pool.submit(function, *args))
+
+    def close(self) -> None:
+        try:
+            for future in self._pending:
+                future.result()
+        finally:
+            self._pool.shutdown(wait=True)
