@@ -26,7 +26,7 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
-from bench.harness import captures, stages
+from bench.harness import CONFIG_DIR, captures, stages
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
 from bench.harness.results import BackgroundWriter, ResultsCsv, write_depth
@@ -41,7 +41,6 @@ from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
 
 log = logging.getLogger("bench")
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 
 
 def _capture_dirs(dataset: DictConfig, root: Path) -> list[Path]:

@@ -35,10 +35,11 @@ STAGES = ("read", "ground_truth", "store_key", "store", "method", "metrics", "ou
 def timed_stages(spent: dict):
     """Wrap the functions the app calls with timers adding seconds to `spent[stage]`; restore them afterwards."""
     import methods
-    from bench.harness import app, store
+    from bench.harness import app, captures, store
     from bench.maroon import reader
 
-    targets = [(reader, "read_capture", "read"), (app, "ground_truth", "ground_truth"),
+    targets = [(reader, "read_capture", "read"), (captures, "ground_truth_rasters_m", "ground_truth"),
+               (captures, "ground_truth_from_rasters", "ground_truth"), (captures, "load_kept", "ground_truth"),
                (app, "capture_files", "store_key"), (store.Store, "capture_digest", "store_key"),
                (store.Store, "get", "store"), (store.Store, "put", "store"), (store.Store, "copy_arrays", "outputs"),
                (methods, "reconstruct", "method"), (app, "resample_depth_m", "metrics"),

@@ -14,6 +14,8 @@ from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.types import HydraContext
 from omegaconf import DictConfig
 
+from bench.harness import stages
+
 
 class _ComposedOnce:
     """A config loader that returns a configuration composed by `keep` to the first `load_sweep_config` asking
@@ -24,11 +26,15 @@ class _ComposedOnce:
         self._kept: dict[tuple[str, ...], DictConfig] = {}
 
     def keep(self, master_config: DictConfig, overrides: Sequence[str]) -> None:
-        self._kept[tuple(overrides)] = self._loader.load_sweep_config(master_config, list(overrides))
+        with stages.stage("composition"):
+            self._kept[tuple(overrides)] = self._loader.load_sweep_config(master_config, list(overrides))
 
     def load_sweep_config(self, master_config: DictConfig, sweep_overrides: list[str]) -> DictConfig:
         kept = self._kept.pop(tuple(sweep_overrides), None)
-        return kept if kept is not None else self._loader.load_sweep_config(master_config, sweep_overrides)
+        if kept is not None:
+            return kept
+        with stages.stage("composition"):
+            return self._loader.load_sweep_config(master_config, sweep_overrides)
 
     def __getattr__(self, name):
         if name in ("_loader", "_kept"):      # not yet set (while unpickling): not the loader's
