@@ -25,7 +25,8 @@ _background: collections.Counter = collections.Counter()
 _stack: list[list] = []                   # [name, started] of the open stages, innermost last
 _lock = threading.Lock()
 _on = False
-_started = time.perf_counter()
+_clock = time.perf_counter
+_started = _clock()
 
 
 def enabled() -> bool:
@@ -36,7 +37,7 @@ def begin(name: str) -> None:
     """Open stage `name` on the main thread (the stage it interrupts stops counting until `end`)."""
     if not _on:
         return
-    now = time.perf_counter()
+    now = _clock()
     if _stack:
         _seconds[_stack[-1][0]] += now - _stack[-1][1]
     _stack.append([name, now])
@@ -46,7 +47,7 @@ def end() -> None:
     """Close the innermost open stage; the one it interrupted counts again."""
     if not _on or not _stack:
         return
-    now = time.perf_counter()
+    now = _clock()
     name, started = _stack.pop()
     _seconds[name] += now - started
     if _stack:
