@@ -80,15 +80,17 @@ def steps(total: int | None, description: str, unit: str = "step", enabled: bool
             lines.finish()
 
 
-def each(items: Iterable[T], description: str, unit: str = "step", enabled: bool = True) -> Iterator[T]:
+def each(items: Iterable[T], description: str, unit: str = "step", enabled: bool = True,
+         expected_s: float | None = None) -> Iterator[T]:
     """The items, one bar step each (`steps`); the total is known when `items` has a length. Where no bar is
-    drawn, a `Heartbeat` says how far the loop is at least every HEARTBEAT_S seconds."""
+    drawn, a `Heartbeat` says how far the loop is at least every HEARTBEAT_S seconds (with `expected_s`, the
+    seconds an item took before, an estimate from the first item on)."""
     total = len(items) if hasattr(items, "__len__") else None
     with steps(total, description, unit, enabled) as progress:
         started, done = time.perf_counter(), [0]     # (a disabled tqdm bar does not count)
 
         def state() -> str:
-            return f"{description}: {how_far(done[0], total, unit, time.perf_counter() - started)}"
+            return f"{description}: {how_far(done[0], total, unit, time.perf_counter() - started, expected_s)}"
 
         with Heartbeat(state) if progress.disable else contextlib.nullcontext():
             for item in items:
@@ -100,11 +102,16 @@ def each(items: Iterable[T], description: str, unit: str = "step", enabled: bool
 HEARTBEAT_S = 30.0
 
 
-def how_far(done: int, total: int | None, unit: str, elapsed_s: float) -> str:
-    """`3/8 frames done, 41 s, about 68 s left` (the rate so far; no estimate before the first step)."""
+def how_far(done: int, total: int | None, unit: str, elapsed_s: float, expected_s: float | None = None) -> str:
+    """`3/8 frames done, 41 s, about 68 s left`: the rate so far, or before the first step the seconds a step took
+    in earlier runs (`expected_s`; none known: no estimate)."""
     text = f"{done}/{total if total is not None else '?'} {unit}s done, {elapsed_s:.0f} s"
-    if done and total is not None and total > done:
-        text += f", about {elapsed_s / done * (total - done):.0f} s left"
+    if total is None or total <= done:
+        return text
+    if done:
+        return f"{text}, about {elapsed_s / done * (total - done):.0f} s left"
+    if expected_s is not None:
+        return f"{text}, about {max(expected_s * total - elapsed_s, 0.0):.0f} s left (earlier runs)"
     return text
 
 

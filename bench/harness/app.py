@@ -27,6 +27,7 @@ from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
 from bench.harness import CONFIG_DIR, captures, stages
+from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
 from bench.harness.results import BackgroundWriter, ResultsCsv, write_depth
@@ -348,9 +349,14 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
     label = f"{method.label} {cfg.freq.name}{f' {params}' if params else ''}"
+    durations = None if store is None else Durations(store.root)
+    configuration = configuration_id(cell)
+    expected_s = None if durations is None else durations.seconds(configuration)
+    computed_s = []
     try:
         # a bar per job only when it runs alone: jobs side by side on one terminal would draw over each other
-        for capture_dir, frame in each(todo, label, unit="frame", enabled=timing == "alone"):
+        for capture_dir, frame in each(todo, label, unit="frame", enabled=timing == "alone", expected_s=expected_s):
+            started = time.perf_counter()
             key = hit = None
             if store is not None:
                 with stages.stage("reading"):
@@ -374,11 +380,14 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
             rows.append({**row, "cached": hit is not None})
             writer.submit(_write_outputs, out_dir, rows[-1], arrays, grid, store, key, results_csv)
             if hit is None:
+                computed_s.append(time.perf_counter() - started)
                 log.info("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"],
                          row["distance"], row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
     finally:
         with stages.stage("outputs"):
             writer.close()
+    if durations is not None and computed_s:
+        durations.record(configuration, statistics.fmean(computed_s))
     cached = sum(row["cached"] for row in rows)
     if cached:
         log.info("%d of %d capture frames from the store (%s)", cached, len(rows), store.root)

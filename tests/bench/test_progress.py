@@ -144,3 +144,12 @@ def test_a_heartbeat_says_how_far_a_loop_without_bar_is(capsys):
     with progress.Heartbeat(lambda: beats.append(1) or "MM-2FSK d10: 1/2 frames done", every_s=0.05):
         time.sleep(0.3)
     assert len(beats) >= 2 and "... MM-2FSK d10: 1/2 frames done\n" in capsys.readouterr().err
+
+
+def test_before_its_first_step_a_loop_estimates_from_earlier_runs():
+    from bench import progress
+
+    assert progress.how_far(0, 8, "frame", 10.0, expected_s=5.0) == \
+        "0/8 frames done, 10 s, about 30 s left (earlier runs)"
+    assert progress.how_far(0, 8, "frame", 10.0) == "0/8 frames done, 10 s"
+    assert progress.how_far(4, 8, "frame", 10.0, expected_s=5.0) == "4/8 frames done, 10 s, about 10 s left"

@@ -102,3 +102,16 @@ def test_stage_seconds_go_to_the_innermost_open_stage(monkeypatch):
     with stages.stage("methods"):           # 6 .. 10
         pass
     assert dict(stages._seconds) == {"reading": 4.0, "imports": 2.0, "methods": 4.0}
+
+
+def test_a_job_records_its_seconds_per_frame_for_the_next_estimate(synth_root, tmp_path):
+    from bench.harness.durations import Durations, configuration_id
+
+    cfg = _cfg(synth_root, tmp_path / "store", "cell=2fsk_d05")
+    app.run(cfg, tmp_path / "a")
+    method = app._method(cfg)
+    cell = app._cell(cfg, "cpu", method)
+    seconds = Durations(tmp_path / "store").seconds(configuration_id(cell))
+    assert seconds is not None and seconds > 0
+    assert configuration_id({**cell, "code": "other"}) == configuration_id(cell)      # survives a code change
+    assert configuration_id({**cell, "threshold_db": 3.0}) != configuration_id(cell)
