@@ -400,7 +400,7 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
     """Read, reconstruct and score one capture frame: (row, arrays, metric grid)."""
     def read(parts):
         with stages.stage("reading"):
-            return captures.read(capture_dir, frame, parts, empty_filtered, antenna_files)
+            return captures.read(capture_dir, frame, parts, empty_filtered, antenna_files, store)
 
     capture = read(_method_parts(cfg.prior.name))
     with stages.stage("ground truth"):

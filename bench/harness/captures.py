@@ -1,5 +1,6 @@
 """Per-capture work outside the methods, done once per capture and process, not once per cell: reading (each part
-of a frame read once) and the ground truth (ray casts, silhouettes, KD-tree).
+of a frame read once) and the ground truth (ray casts, silhouettes, KD-tree). With a result store, the parsed mesh
+is kept there by the content of its file (`<store>/meshes/`), so later sweeps need no Open3D to read it.
 
 The ground truth's rasters (the costly part: two ray casts of the mesh) are also kept on disk under the result
 store, `<store>/ground_truth/<key>.h5`, keyed like the store's cells by the content of the files they come from
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import functools
 import json
 import os
 from collections.abc import Callable
@@ -22,7 +24,7 @@ import numpy as np
 from bench.harness.store import Store, code_version
 from bench.maroon import reader
 from bench.maroon.antennas import load_antenna_array
-from methods.domain.capture import Capture
+from methods.domain.capture import Capture, Mesh
 from metrics.evaluate import GroundTruth, ground_truth_from_rasters, ground_truth_rasters_m
 
 CAPTURES_KEPT = 16           # capture frames kept in memory (a sweep's captures: the paper's 8 at one distance)
@@ -34,11 +36,11 @@ _GROUND_TRUTHS: collections.OrderedDict = collections.OrderedDict()
 
 
 def read(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
-         antenna_files: tuple[str | None, str | None]) -> Capture:
+         antenna_files: tuple[str | None, str | None], store: Store | None = None) -> Capture:
     """The capture frame with `parts`, each part read once per process: a worker (or the basic launcher's one
     process) runs many cells on the same captures, BP needing radar and mesh and MM-2FSK the RealSense frame too,
     so a later cell reads only the parts no earlier cell read (the RealSense frame paired with the cached radar
-    frame's time, as read_capture pairs it)."""
+    frame's time, as read_capture pairs it). With a store, a mesh file parsed once is kept there (`kept_mesh`)."""
     key = (capture_dir, frame, empty_filtered, antenna_files)
     cached, have = _CAPTURES.pop(key, (None, ()))
     missing = tuple(part for part in parts if part not in have)
@@ -48,7 +50,8 @@ def read(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: 
                 and (capture_dir / "realsense").is_dir():
             paired = reader.realsense_pairing(capture_dir / "realsense", cached.radar.timestamp_s).realsense_frame
         new = reader.read_capture(capture_dir, frame=frame, parts=missing, empty_filtered=empty_filtered,
-                                  antennas=load_antenna_array(*antenna_files), realsense_frame=paired)
+                                  antennas=load_antenna_array(*antenna_files), realsense_frame=paired,
+                                  mesh_reader=None if store is None else functools.partial(kept_mesh, store))
         if cached is not None:
             new = dataclasses.replace(cached, notes=cached.notes + new.notes,
                                       transforms=new.transforms if "mesh" in missing else cached.transforms,
@@ -58,6 +61,19 @@ def read(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: 
     while len(_CAPTURES) > CAPTURES_KEPT:
         _CAPTURES.popitem(last=False)
     return dataclasses.replace(cached, **{part: None for part in reader.PARTS if part not in parts})
+
+
+def kept_mesh(store: Store, path: Path) -> Mesh:
+    """The mesh file `path` parsed (bench.maroon.reader.read_mesh: Open3D and its checks) the first time its
+    content is seen, then read back from `<store>/meshes/<sha256 of the file>.h5` (vertices, triangles as
+    parsed): a sweep whose prior is the photogrammetry mesh then neither imports Open3D nor parses the OBJ."""
+    kept = store.root / "meshes" / f"{store.file_digest(path)}.h5"
+    if kept.is_file():
+        with h5py.File(kept, "r") as h5:
+            return Mesh(vertices=h5["vertices"][()], triangles=h5["triangles"][()], path=path)
+    mesh = reader.read_mesh(path)
+    _keep(kept, {"vertices": mesh.vertices, "triangles": mesh.triangles})
+    return mesh
 
 
 def _remember(key, gt: GroundTruth) -> GroundTruth:

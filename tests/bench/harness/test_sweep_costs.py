@@ -115,3 +115,22 @@ def test_a_job_records_its_seconds_per_frame_for_the_next_estimate(synth_root, t
     assert seconds is not None and seconds > 0
     assert configuration_id({**cell, "code": "other"}) == configuration_id(cell)      # survives a code change
     assert configuration_id({**cell, "threshold_db": 3.0}) != configuration_id(cell)
+
+
+def test_a_kept_mesh_is_read_back_as_parsed(synth_root, tmp_path, monkeypatch):
+    """The photogrammetry prior's mesh: parsed by Open3D once, then read from the store; same scores."""
+    parsed = []
+    real = reader.read_mesh
+    monkeypatch.setattr(reader, "read_mesh", lambda path: parsed.append(path) or real(path))
+    rows = []
+    for name in ("first", "again"):
+        monkeypatch.setattr(captures, "_CAPTURES", type(captures._CAPTURES)())
+        monkeypatch.setattr(captures, "_GROUND_TRUTHS", type(captures._GROUND_TRUTHS)())
+        rows += app.run(_cfg(synth_root, tmp_path / "store", "method=mm2fsk", "freq=d05", "prior=photogrammetry"),
+                        tmp_path / name)
+        for cell in (tmp_path / "store" / "cells").glob("*"):          # the second run computes again
+            cell.unlink()
+    assert len(parsed) == 1 and len(list((tmp_path / "store" / "meshes").glob("*.h5"))) == 1
+    first, again = rows
+    for column in ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm", "valid_px"):
+        assert first[column] == again[column], column
