@@ -56,6 +56,8 @@ def colliding_jobs(root: Path) -> list[str]:
 def summary_line(root: Path, table: str | None) -> str:
     """`sweep finished: table <root>/table3.md, rows <root>/results.csv; one HTML page: python -m bench.report
     <root>`."""
+    if not (root / "results.csv").is_file():
+        return f"sweep finished without merged rows: see its jobs' logs, {root}/*/app.log"
     table_text = f"table {root / f'{table}.md'}, " if table and (root / f"{table}.md").is_file() else ""
     return (f"sweep finished: {table_text}rows {root / 'results.csv'}; one HTML page: "
             f"python -m bench.report {root}")

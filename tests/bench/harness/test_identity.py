@@ -96,6 +96,8 @@ def test_jobs_whose_rows_share_an_identity_are_named_with_what_they_differ_in(tm
 
 
 def test_the_closing_line_names_the_table_when_there_is_one(tmp_path):
+    assert summary_line(tmp_path, "table3").startswith("sweep finished without merged rows")
+    (tmp_path / "results.csv").write_text("object\n")
     assert summary_line(tmp_path, "table3").startswith(f"sweep finished: rows {tmp_path / 'results.csv'}")
     (tmp_path / "table3.md").write_text("table")
     assert f"table {tmp_path / 'table3.md'}, rows" in summary_line(tmp_path, "table3")
