@@ -11,7 +11,6 @@ from hydra import compose, initialize_config_dir
 from bench.harness import CONFIG_DIR, app, captures, stages
 from bench.harness.results import BackgroundWriter
 from bench.maroon import reader
-from hydra_plugins.mm2fsk_bench.sweeper import _ComposedOnce
 
 
 class _Loader:
@@ -24,6 +23,9 @@ class _Loader:
 
 
 def test_the_launcher_gets_the_configuration_the_check_composed_once():
+    # imported here: Hydra's plugin scan (other tests) imports the module anew, and pickling needs the current class
+    from hydra_plugins.mm2fsk_bench.sweeper import _ComposedOnce
+
     loader = _Loader()
     once = _ComposedOnce(loader)
     once.keep({}, ["freq=d05"])
