@@ -3,12 +3,13 @@
 `python -m bench.perf overhead --root DIR [--cells CELL ...] [--captures OBJECT/DISTANCE ...] [--device cpu|cuda]
 [--grid NAME] [--store] [--out DIR]` runs the cells (default: those of configs/experiment/table3.yaml) one after
 the other in one process through `bench.harness.app.run`, as the basic launcher runs a sweep's jobs (Hydra's per-job
-set-up is not included: time `python -m bench -m experiment=table3 ... hydra/launcher=basic` for that). The app's
-stages are timed where it calls them: reading captures (`reader.read_capture`: each capture is read once per
-frame and parts, then served from the app's cache), the ground truth (`metrics.evaluate.ground_truth`: once per
-capture, grid and object pose), the store's file list and digests, `methods.reconstruct` (its wall time and its
-own warm `total`), resampling and metrics, the store's reads and writes of finished cells (`store`), and the output
-files (depth PNG + JSON + preview, arrays.h5, results.csv).
+set-up is not included: `python -m bench.perf experiment` times whole sweeps). The app's stages are timed where it
+calls them: reading captures (`reader.read_capture`: each capture is read once per frame and parts, then served
+from bench.harness.captures' cache), the ground truth (its ray casts, its rasters kept in the store, its masks:
+once per capture, grid and object pose), the store's file list and digests, `methods.reconstruct` (its wall time
+and its own warm `total`), resampling and metrics, the store's reads and writes of finished cells (`store`), and
+the output files (depth PNG + JSON + preview, arrays.h5, results.csv; written on the app's background thread, so
+they overlap the next capture and `other` can be negative).
 `other` is the cell's wall time minus all of these. Without --store the result store is off (every cell
 computes). One row per cell and a `total` row: OUT/perf_overhead_<device>.csv (OUT = `--out`, default
 outputs/perf/). `--results-frames N [N ...]` times instead what results.csv costs over a sequence of N frames,
