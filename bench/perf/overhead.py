@@ -8,8 +8,8 @@ calls them: reading captures (`reader.read_capture`: each capture is read once p
 from bench.harness.captures' cache), the ground truth (its ray casts, its rasters kept in the store, its masks:
 once per capture, grid and object pose), the store's file list and digests, `methods.reconstruct` (its wall time
 and its own warm `total`), resampling and metrics, the store's reads and writes of finished cells (`store`), and
-the output files (depth PNG + JSON + preview, arrays.h5, results.csv; written on the app's background thread, so
-they overlap the next capture and `other` can be negative).
+the output files (depth PNG + JSON + preview, arrays.h5, results.csv; written in line here, not on the app's
+background thread, so that each second has one stage).
 `other` is the cell's wall time minus all of these. Without --store the result store is off (every cell
 computes). One row per cell and a `total` row: OUT/perf_overhead_<device>.csv (OUT = `--out`, default
 outputs/perf/). `--results-frames N [N ...]` times instead what results.csv costs over a sequence of N frames,
@@ -30,6 +30,16 @@ from bench.perf.sweep import table3_cells
 from bench.progress import each
 
 STAGES = ("read", "ground_truth", "store_key", "store", "method", "metrics", "outputs")
+
+
+class _InlineWriter:
+    """bench.harness.results.BackgroundWriter's interface, writing at once on the caller's thread."""
+
+    def submit(self, function, *args) -> None:
+        function(*args)
+
+    def close(self) -> None:
+        pass
 
 
 @contextlib.contextmanager
@@ -59,9 +69,12 @@ def timed_stages(spent: dict):
 
     for (owner, name, stage), (_, _, function) in zip(targets, originals, strict=False):
         setattr(owner, name, wrap(function, stage))
+    writer = app.BackgroundWriter
+    app.BackgroundWriter = _InlineWriter
     try:
         yield
     finally:
+        app.BackgroundWriter = writer
         for owner, name, function in originals:
             setattr(owner, name, function)
 
