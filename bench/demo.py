@@ -52,7 +52,8 @@ def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]
     return objects, list(settings.distances) if distances_cm is None else list(distances_cm)
 
 
-# Seconds on two quiet cores (docs/measurements/sweep.md), for the estimate the demo prints before it starts.
+# Seconds on two quiet cores before issue 29's work (docs/measurements/sweep.md, issue 29), for the estimate the
+# demo prints before it starts; the image-formation and generator work make them smaller: update them then.
 GENERATE_S_PER_CAPTURE = 12.6
 SWEEP_S_PER_CAPTURE = {"table2": 1.5, "table3": 57.0}
 BP_MAX_S_PER_CAPTURE = 31.0          # table3's longest cell
@@ -72,7 +73,7 @@ def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
     steps += [f"{name} ~{seconds:.0f} s" for name, seconds in sweeps_s.items()]
     text = (f"demo: about {total_s / 60:.0f} min on two quiet cores ({', '.join(steps)}); the long step is "
             f"table3's BP_max (~{n * BP_MAX_S_PER_CAPTURE:.0f} s, one back-projection over 128 frequencies per "
-            f"capture), then the report's pictures")
+            f"capture), then the report's pictures (up to ~3 min when drawn anew)")
     if stored:
         text += f"; cells already in {store} are reused, so this run may take much less"
     return text
