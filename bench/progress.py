@@ -23,7 +23,6 @@ from collections.abc import Callable, Iterable, Iterator
 from typing import TypeVar
 
 from tqdm import tqdm
-from tqdm.contrib.logging import logging_redirect_tqdm
 
 T = TypeVar("T")
 
@@ -72,6 +71,8 @@ def steps(total: int | None, description: str, unit: str = "step", enabled: bool
         if progress.disable or isinstance(sys.stdout, _LinesAboveBars):   # quiet, or an outer bar redirects already
             yield progress
             return
+        from tqdm.contrib.logging import logging_redirect_tqdm  # only with a bar on a terminal
+
         lines = _LinesAboveBars(sys.stdout, sys.stderr)
         try:
             with contextlib.redirect_stdout(lines), logging_redirect_tqdm():
