@@ -13,9 +13,12 @@ computed on another grid is resampled first, metrics.resample):
 * C_s = Chamfer(radar -> GT), C_g = Chamfer(GT -> radar) with KD-trees;
 * P = mean |D_radar - D_gt| over radar points on the silhouette with ground truth; P_e the same on the eroded
   silhouette;
-* off = share (%) of radar points off the silhouette (false positives: the paper's P never sees them), off_err
-  their mean distance to the nearest ground-truth point.
-`faithful=True` reproduces the reference code's C_g, C_s, P and P_e instead (README "The faithful profile"):
+* off = share (%) of the triangulated radar points off the silhouette or outside mask_bb (false positives: the
+  paper's P never sees them), off_err the mean distance of those inside mask_bb to the nearest ground-truth point;
+* coverage = share (%) of the silhouette's pixels that hold a radar point the profile scores: how much of the
+  object the method returned (bench.report.scoring turns it into the success rule's floor).
+`faithful=True` reproduces the reference code's C_g, C_s, P and P_e instead (docs/guide/metrics.md "The faithful
+profile"):
 * ground truth sampled at MAROON's shifted positions K^-1 (u + 0.5, v + 0.5) (up to one pixel off the pixel
   centres at the far edges), triangulated with the reference's quad rule, restricted to mask_bb for C_g / C_s;
 * radar points triangulated with the reference's quad rule (methods.domain.lattice 'maroon': three-valid quads
@@ -52,8 +55,8 @@ from metrics.masks import (
 
 TRIANGULATION_THRESHOLD_M = 0.01
 METRIC_COLUMNS = ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm")
-COUNT_COLUMNS = ("C_g_px", "C_s_px", "P_px", "P_e_px", "off_px", "outside_bb_px")
-SCORE_COLUMNS = (*METRIC_COLUMNS, "off_pct", "off_err_cm", *COUNT_COLUMNS, "failure")
+COUNT_COLUMNS = ("C_g_px", "C_s_px", "P_px", "P_e_px", "off_px", "outside_bb_px", "silhouette_px")
+SCORE_COLUMNS = (*METRIC_COLUMNS, "coverage_pct", "off_pct", "off_err_cm", *COUNT_COLUMNS, "failure")
 
 
 @dataclass
@@ -220,6 +223,9 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
         on, on_eroded = selected & gt.silhouette & has_gt, selected & gt.eroded_silhouette & has_gt
         p_px, p_e_px = int(on.sum()), int(on_eroded.sum())
         p_cm, p_e_cm = _mean_abs_cm(depth_m, gt.depth_m, on), _mean_abs_cm(depth_m, gt.depth_m, on_eroded)
+    outside = used & ~selected
+    counted = selected.sum() + outside.sum()
+    silhouette_px = int(gt.silhouette.sum())
     off_points_m = points_m[off]
     off_err_cm = (float(np.mean(nearest_distances_m(off_points_m, gt.points))) * 100.0
                   if len(off_points_m) and len(gt.points.points_m) else float("nan"))
@@ -227,10 +233,11 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
         "C_g_cm": one_sided_chamfer_m(gt_points.points_m, PointSet(radar_points_m)) * 100.0,
         "C_s_cm": one_sided_chamfer_m(radar_points_m, gt_points) * 100.0,
         "P_cm": p_cm, "P_e_cm": p_e_cm,
-        "off_pct": 100.0 * off.sum() / selected.sum() if selected.any() else float("nan"),
+        "coverage_pct": 100.0 * (selected & gt.silhouette).sum() / silhouette_px if silhouette_px else float("nan"),
+        "off_pct": 100.0 * (off.sum() + outside.sum()) / counted if counted else float("nan"),
         "off_err_cm": off_err_cm,
         "C_g_px": len(gt_points.points_m), "C_s_px": len(radar_points_m), "P_px": p_px, "P_e_px": p_e_px,
-        "off_px": int(off.sum()), "outside_bb_px": int((used & ~selected).sum()),
+        "off_px": int(off.sum()), "outside_bb_px": int(outside.sum()), "silhouette_px": silhouette_px,
     }
     scores["failure"] = _failure(depth_m, used, selected, scores)
     return scores
@@ -238,6 +245,6 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
 
 def no_ground_truth_scores(reason: str) -> dict[str, float | int | str]:
     """SCORE_COLUMNS of a capture that cannot be evaluated (e.g. no mesh): NaN metrics, zero counts, `reason`."""
-    scores = {name: float("nan") for name in (*METRIC_COLUMNS, "off_pct", "off_err_cm")}
+    scores = {name: float("nan") for name in (*METRIC_COLUMNS, "coverage_pct", "off_pct", "off_err_cm")}
     scores.update(dict.fromkeys(COUNT_COLUMNS, 0), failure=reason)
     return scores

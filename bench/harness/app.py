@@ -38,10 +38,20 @@ from bench.maroon.frames import parse_frame_spec, select_frames
 from bench.progress import each
 from methods.domain.capture import Capture, RadarGrid
 from methods.domain.errors import DatasetError
+from methods.ops.frequencies import config_targets_ghz
 from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
 
 log = logging.getLogger("bench")
+
+
+def _freq_ghz(name: str) -> list[float] | None:
+    """configs/freq/*.yaml's `f_ghz`: the targets of the one frequency table (methods.ops.frequencies)."""
+    targets = config_targets_ghz(name)
+    return None if targets is None else list(targets)
+
+
+OmegaConf.register_new_resolver("freq_ghz", _freq_ghz, replace=True)
 
 
 def _capture_dirs(dataset: DictConfig, root: Path) -> list[Path]:
@@ -134,7 +144,8 @@ def _pairing_columns(capture: Capture, capture_dir: Path) -> dict:
 
 
 def _container(node):
-    return None if node is None else OmegaConf.to_container(node)
+    """A config node as plain Python (a resolver's value, e.g. freq.f_ghz, is plain already)."""
+    return OmegaConf.to_container(node) if OmegaConf.is_config(node) else node
 
 
 def _roi(cfg: DictConfig) -> str | dict:

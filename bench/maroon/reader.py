@@ -35,8 +35,9 @@ from bench.maroon.safe_pickle import load_pickled_dict
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import CameraIntrinsics, Capture, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
 from methods.domain.errors import DatasetError, display_path
+from methods.domain.radar import radar_folder_name
 
-RADAR_FOLDER = "radar_72.0_82.0_128"
+RADAR_FOLDER = radar_folder_name()          # radar_72.0_82.0_128
 MESH_CANDIDATES = ("mesh_masked_smoothed.obj", "mesh_masked.obj", "mesh_smoothed.obj", "mesh.obj")
 # MAROON's configured reconstruction grid, used only when calibration.json has no entry for a frame (2.5, 7).
 CONFIG_GRID = RadarGrid(bb_min_m=(-0.15, -0.15, 0.25), bb_max_m=(0.15, 0.15, 0.40), size=(301, 301, 151))

@@ -17,6 +17,7 @@ COMMANDS = {
     "skips": ("skips", "every skip off and on per catalogue object (CPU)"),
     "skips-gpu": ("skips_gpu", "the skips on fresh frames on a Warp device"),
     "skips-reference": ("skips_reference", "the public reference kernels' full computation for the skips"),
+    "formation": ("formation", "the column-separable BP and BP_max's search on the device, runtime against error"),
 }
 
 

@@ -32,9 +32,9 @@ from bench.perf.common import DEFAULT_OUT, write_rows
 from bench.perf.frames import run_frames
 from bench.progress import each
 from methods.backends import correlate, correlate_volume
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.correlate import C_M_PER_S, correlate_reference
 
-ALL_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 SIZES = {"paper": (301, 201), "small": (61, 21)}
 CSV_COLUMNS = ["case", "device", "impl", "n_points", "n_freqs", "median_ms", "kernel_ms", "scaled", "direct_impl",
                "direct_ms", "speedup", "rel_err_vs_f64", "separable_kernel_ms"]
@@ -93,7 +93,7 @@ def run_cases(device: str, sizes: str, repeat: int, cpu_z: int) -> list[dict]:
     cases = [("mm2fsk_2fsk", [120, 127], "points"), ("3fsk", [0, 64, 127], "points"),
              ("bp", [120, 127], "volume"), ("bp_max", list(range(128)), "volume")]
     for name, idx, kind in each(cases, "correlation cases", unit="case"):
-        freqs_hz = ALL_FREQS_HZ[idx]
+        freqs_hz = MAROON_FREQS_HZ[idx]
         signal = rng.standard_normal((94, 94, len(idx))) + 1j * rng.standard_normal((94, 94, len(idx)))
         row = {"case": name, "device": device, "n_freqs": len(idx)}
         if kind == "points":

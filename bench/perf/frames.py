@@ -34,17 +34,17 @@ from bench import cli
 from bench.maroon.antennas import load_antenna_array
 from bench.perf.common import DEFAULT_OUT, percentile, write_rows
 from bench.progress import each
+from bench.synth.memory import CAMERA, make_capture
 from methods import reconstruct
-from methods.domain.capture import CameraIntrinsics, Capture, DepthFrame, Metadata, RadarFrame, RadarGrid
+from methods.domain.capture import Capture, DepthFrame, RadarGrid
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.method import SENSOR_PRIORS
 from methods.ops.correlate import C_M_PER_S
 from methods.prior.priors import DEFAULT_FILL, FILLS
 
-FREQS_HZ = np.linspace(72e9, 82e9, 128)
 CASES = (("mm2fsk", "d10", "realsense"), ("2fsk", "d05", "none"), ("3fsk", "d05_d10", "none"),
          ("bp", "d05", "none"), ("bp", "full", "none"))
 GRID = RadarGrid((-0.15, -0.15, 0.22), (0.15, 0.15, 0.42), (301, 301, 201))
-CAMERA = CameraIntrinsics(fx=615.0, fy=615.0, cx=320.0, cy=240.0, width=640, height=480)
 REALSENSE2RADAR = np.diag([1e-3, -1e-3, 1e-3, 1.0])     # camera at the radar origin, y down, millimetres
 SCATTERER_PITCH_M = 0.005
 
@@ -84,9 +84,9 @@ def _signal(antennas, points_m: np.ndarray) -> np.ndarray:
     one frequency to the next by a complex multiply (the frequencies are equidistant), summed in complex64."""
     d_rx = np.linalg.norm(points_m[:, None, :] - antennas.rx_m[None], axis=2)        # (K, 94)
     d_tx = np.linalg.norm(points_m[:, None, :] - antennas.tx_m[None], axis=2)
-    k = 2 * np.pi * FREQS_HZ / C_M_PER_S
+    k = 2 * np.pi * MAROON_FREQS_HZ / C_M_PER_S
     dk = k[1] - k[0]
-    signal = np.empty((len(antennas.rx_m), len(antennas.tx_m), len(FREQS_HZ)), dtype=np.complex64)
+    signal = np.empty((len(antennas.rx_m), len(antennas.tx_m), len(MAROON_FREQS_HZ)), dtype=np.complex64)
     rx, tx = np.exp(-1j * k[0] * d_rx), np.exp(-1j * k[0] * d_tx)
     step_rx, step_tx = np.exp(-1j * dk * d_rx), np.exp(-1j * dk * d_tx)
     for f in range(len(k)):
@@ -150,11 +150,8 @@ def _scatterers_m(pieces) -> np.ndarray:
 
 
 def _capture(name: str, signal: np.ndarray, depth: DepthFrame, grid: RadarGrid = GRID) -> Capture:
-    radar = RadarFrame(index=0, signal=signal, freqs_hz=FREQS_HZ, timestamp_s=None, grid=grid, path=Path("memory"))
-    metadata = Metadata(distance_m=0.32, mask_erosion=20, mask_bb_m={}, calibration=None, labels=(), raw={})
-    return Capture(root=Path("memory"), object_name=name, distance_cm=32, metadata=metadata,
-                   transforms={"realsense2radar": REALSENSE2RADAR}, antennas=load_antenna_array(),
-                   radar_frames=[0], radar=radar, realsense=depth)
+    return make_capture(signal, MAROON_FREQS_HZ, grid, realsense=depth, transforms={"realsense2radar": REALSENSE2RADAR},
+                        name=name, distance_cm=32, mask_erosion=20)
 
 
 def frame_capture() -> Capture:

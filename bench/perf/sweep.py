@@ -21,9 +21,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
+from omegaconf import OmegaConf
 
 from bench import cli
+from bench.harness.app import CONFIG_DIR
 from bench.harness.grids import grid_for
 from bench.maroon.reader import discover_captures, read_capture
 from bench.perf.common import DEFAULT_OUT, write_rows
@@ -34,25 +35,31 @@ from methods.backends import backend_for
 from methods.domain.capture import Capture, RadarGrid
 from methods.mm2fsk import reconstruct_mm2fsk
 
-CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
+def table3_cells() -> list[dict]:
+    """The table3 cells in sweep order, each composed by Hydra as the sweep composes it: name, method, f_ghz
+    (None = all), prior, scalar_prior_m (m), grid (name)."""
+    from hydra import compose, initialize_config_dir
 
-def _yaml(path: Path) -> dict:
-    return yaml.safe_load(path.read_text())
-
-
-def table3_cells(configs: Path = CONFIGS) -> list[dict]:
-    """The table3 cells in sweep order: name, method, f_ghz (None = all), prior, scalar_prior_m (m), grid (name)."""
-    names = _yaml(configs / "experiment" / "table3.yaml")["hydra"]["sweeper"]["params"]["cell"].split(",")
-    cells = []
-    for name in names:
-        picks = {k.split("/")[-1]: v for d in _yaml(configs / "cell" / f"{name}.yaml")["defaults"] for k,
-                 v in d.items()}
-        prior = _yaml(configs / "prior" / f"{picks['prior']}.yaml")
-        cells.append({"cell": name, "method": _yaml(configs / "method" / f"{picks['method']}.yaml")["name"],
-                      "f_ghz": _yaml(configs / "freq" / f"{picks['freq']}.yaml")["f_ghz"], "prior": prior["name"],
-                      "scalar_prior_m": float(prior["scalar_m"]), "grid": picks.get("grid", "from_capture")})
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        sweep = compose(config_name="config", overrides=["experiment=table3"], return_hydra_config=True)
+        names = str(sweep.hydra.sweeper.params.cell).split(",")
+        cells = []
+        for name in names:
+            cfg = compose(config_name="config", overrides=[f"cell={name}"])
+            cells.append({"cell": name, "method": cfg.method.name,
+                          "f_ghz": None if cfg.freq.f_ghz is None else list(cfg.freq.f_ghz),
+                          "prior": cfg.prior.name, "scalar_prior_m": float(cfg.prior.scalar_m),
+                          "grid": cfg.grid.name})
     return cells
+
+
+def _grid_override(name: str) -> dict:
+    """The `override` of grid config `name` (configs/grid/), composed by Hydra."""
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        return OmegaConf.to_container(compose(config_name="config", overrides=[f"grid={name}"]).grid.override)
 
 
 def _grid(capture: Capture, method: str, bp_override: dict | None, image_override: dict | None) -> RadarGrid:
@@ -161,7 +168,7 @@ def main(argv=None) -> int:
     root = cli.existing_path(args.root, "dir", "dataset root")
     device = cli.resolve_device(args.device)
     out = cli.output_dir(args.out)
-    bp_override = _yaml(CONFIGS / "grid" / "bp_cpu.yaml")["override"] if args.bp_grid == "small" else None
+    bp_override = _grid_override("bp_cpu") if args.bp_grid == "small" else None
     rows = run_sweep(root, device, args.repeat, bp_override)
     write_rows(rows, out / f"perf_sweep_{device}.csv")
     return 0

@@ -1,7 +1,8 @@
 """After a multirun: merge the jobs' rows into the sweep root and write its table and plots (a Hydra callback).
 
 Sweep root after `python -m bench -m experiment=table3`: `results.csv` (every job's rows), `table3.md`, `.csv`,
-`.tex` (bench.report.tables), `runtime_vs_error.png` and, with `report.depth_errors=true`,
+`.tex` and `table3_pairs.csv` (bench.report.tables: every pair of rows compared per capture),
+`runtime_vs_error.png` (redrawn only when the table changed) and, with `report.depth_errors=true`,
 `depth_errors/<object>_<distance>_<frame>.png` (bench.report.plots; off by default: the figures cost more than the
 rest of the merge).
 `python -m bench.report.merge ROOT [--table NAME]` does the same for a sweep that was interrupted before the end.
@@ -34,8 +35,8 @@ def merge(root: Path) -> pd.DataFrame:
 
 
 def report(root: Path, table: str | None, depth_errors: bool = False) -> pd.DataFrame:
-    """Merge the rows; with a table name also write the table (md, csv, tex) and the runtime plot, and with
-    depth_errors the per-capture depth-error figures; returns the summary."""
+    """Merge the rows; with a table name also write the table (md, csv with its pairs, tex) and the runtime plot,
+    and with depth_errors the per-capture depth-error figures; returns the summary."""
     from bench.report import (
         plots,  # matplotlib (~1 s): only at the end of a sweep, not in every run that loads the callback
     )
@@ -43,16 +44,29 @@ def report(root: Path, table: str | None, depth_errors: bool = False) -> pd.Data
     rows = merge(root)
     summary = tables.summarise(rows)
     if table is not None:
-        text = tables.caption(table, rows)
+        text = tables.caption(table, rows, summary=summary)
         (root / f"{table}.md").write_text(f"{text}\n\n{tables.summary_markdown(summary)}\n")
-        summary.to_csv(root / f"{table}.csv", index=False, float_format="%.4f")
+        tables.write_csv(summary, root / f"{table}.csv", tables.paired_comparisons(rows))
         (root / f"{table}.tex").write_text(tables.summary_latex(summary, text))
-        plots.runtime_vs_error(summary, root / "runtime_vs_error.png", f"{table}: runtime against error")
+        runtime_plot(root, table, summary)
     if table is not None and depth_errors:
-        runs = [(tables.row_label(*pd.read_csv(p.parent / "results.csv").loc[0, ["method", "freq"]]), p)
-                for p in job_files(root, "arrays.h5")]
+        runs = [(tables.job_label(p.parent / "results.csv"), p) for p in job_files(root, "arrays.h5")]
         plots.depth_error_maps(runs, root / "depth_errors")
     return summary
+
+
+def runtime_plot(root: Path, table: str, summary: pd.DataFrame) -> Path:
+    """`root/runtime_vs_error.png` (bench.report.plots), redrawn only when the summary or the plotting code changed
+    (bench.report.keyed)."""
+    from bench.report import keyed, plots
+
+    path = root / "runtime_vs_error.png"
+    key = keyed.digest(summary.to_csv(), table, keyed.module_source(plots))
+    keys = keyed.Keys(root)
+    if not keys.fresh(path.name, key, [path]):
+        plots.runtime_vs_error(summary, path, f"{table}: runtime against error")
+        keys.record(path.name, key)
+    return path
 
 
 class MergeResults(Callback):

@@ -12,16 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.stress.scenes import (
-    MAROON_FREQS_HZ,
-    TABLE1_CONFIGS,
-    THREE_FREQ_CONFIGS,
-    antennas,
-    frame,
-    pixel_grid,
-    plate_points_m,
-)
+from bench.stress.scenes import TABLE1_CONFIGS, THREE_FREQ_CONFIGS, antennas, frame, pixel_grid
+from bench.synth.memory import plate_points_m
 from methods.backends import correlate, resolve_device
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.fsk import depth_correction_m
 from methods.fsk3 import slope_correction_m
 from methods.ops.correlate import correlate_reference

@@ -5,27 +5,22 @@ picked from the MAROON sweep `linspace(72, 82, 128)` GHz by the named configurat
 """
 from __future__ import annotations
 
-from functools import cache
-
 import numpy as np
 
-from bench.maroon.antennas import load_antenna_array
 from bench.synth import simulate_frame
+from bench.synth.memory import ANTENNAS
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.frequencies import config_indices, max_unambiguous_depth_m
 
-MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 TABLE1_CONFIGS = ("d05", "d1", "d2", "d4", "d8", "d10")
 THREE_FREQ_CONFIGS = ("d05_d10", "d1_d10", "d2_d10")
-PLATE_HALF_SIZE_M = 0.03
-PLATE_SPACING_M = 0.001            # < lambda / 2 at 82 GHz: no grating lobes
 
 
-@cache
 def antennas() -> AntennaArray:
     """The packaged QAR50 imaging array (94 tx, 94 rx), radar space."""
-    return load_antenna_array()
+    return ANTENNAS
 
 
 def config_freqs_hz(config: str) -> np.ndarray:
@@ -43,13 +38,6 @@ def frame(points_m: np.ndarray, freqs_hz: np.ndarray) -> np.ndarray:
     points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     array = antennas()
     return simulate_frame(points_m, np.ones(len(points_m), np.complex64), array.tx_m, array.rx_m, freqs_hz)
-
-
-def plate_points_m(z_m: float) -> np.ndarray:
-    """Scatterers (K, 3) on a 6 x 6 cm square plate facing the array at depth z_m, 1 mm apart."""
-    axis = np.arange(-PLATE_HALF_SIZE_M, PLATE_HALF_SIZE_M + PLATE_SPACING_M / 2, PLATE_SPACING_M)
-    x, y = np.meshgrid(axis, axis)
-    return np.column_stack([x.ravel(), y.ravel(), np.full(x.size, z_m)])
 
 
 def pixel_grid(half_xy_m: float, n_xy: int, z_m: float) -> RadarGrid:

@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.stress.scenes import MAROON_FREQS_HZ, antennas, config_freqs_hz, dd_max_m, frame, pixel_grid, plate_points_m
+from bench.stress.scenes import antennas, config_freqs_hz, dd_max_m, frame, pixel_grid
+from bench.synth.memory import plate_points_m
 from methods.domain.capture import RadarGrid
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.fsk import reconstruct_2fsk
 from methods.fsk3 import reconstruct_3fsk
 from methods.mm2fsk import reconstruct_mm2fsk

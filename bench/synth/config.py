@@ -13,9 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from methods.domain.radar import C_M_PER_S, MAROON_F_HIGH_GHZ, MAROON_F_LOW_GHZ, MAROON_N_FREQS
+
 GENERATOR_VERSION = "7"          # bump when the generator's output changes for an unchanged config
-C_M_PER_S = 299_792_458.0
-F_LOW_GHZ, F_HIGH_GHZ = 72.0, 82.0
+F_LOW_GHZ, F_HIGH_GHZ = MAROON_F_LOW_GHZ, MAROON_F_HIGH_GHZ
 QUARTER_WAVELENGTH_M = C_M_PER_S / (F_HIGH_GHZ * 1e9) / 4.0   # 0.914 mm at 82 GHz
 DISTANCE_RANGE_CM = (20, 70)   # objects stay in front of the clutter region and the 1 m wall
 
@@ -29,7 +30,7 @@ class SynthConfig:
     motion: str = "static"                   # static | lateral | approach: the object's trajectory (motion.py)
     motion_speed_m_s: float = 0.05           # speed of a moving object
     radar_period_s: float = 0.1              # time between radar frames of a moving sequence (RealSense: 30 Hz)
-    frequency_points: int = 128              # linspace(72 GHz, 82 GHz, frequency_points)
+    frequency_points: int = MAROON_N_FREQS   # linspace(72 GHz, 82 GHz, frequency_points)
     # radar scene model
     sample_spacing_m: float = 0.9e-3         # surface samples at most this far apart (<= lambda/4 at 82 GHz)
     reflectivity_exponent: float = 1.0       # amplitude ~ area * cos(theta_inc)^q
@@ -79,7 +80,7 @@ class SynthConfig:
     element_gain_dbi: float = 6.0            # per antenna element
     noise_figure_db: float = 12.0            # receiver
     if_bandwidth_hz: float = 1.0e6           # 1 / dwell per frequency step and transmitter
-    amplitude_scale: float = 1.0             # calibrated-frame scale: multiplies every radar sample (see README)
+    amplitude_scale: float = 1.0             # calibrated-frame scale: multiplies every radar sample (synth/README.md)
     # ground truth (photogrammetry mesh to radar registration residual)
     gt_registration_mm: float = 0.0
     gt_registration_deg: float = 0.0

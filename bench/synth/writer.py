@@ -7,10 +7,11 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from bench.synth import photogrammetry
+from bench.synth.camera import photogrammetry
 from bench.synth.config import F_HIGH_GHZ, F_LOW_GHZ
 from bench.synth.meshes import indexed
 from methods.domain.capture import RadarGrid
+from methods.domain.radar import radar_folder_name as maroon_radar_folder
 
 RADAR_HALF_WIDTH_M = 0.15
 RADAR_HALF_DEPTH_M = 0.10
@@ -18,8 +19,8 @@ RADAR_GRID_SIZE = (301, 301, 201)
 
 
 def radar_folder_name(frequency_points: int) -> str:
-    """MAROON's `radar_{float(f_low)}_{float(f_high)}_{int(points)}`, e.g. radar_72.0_82.0_128."""
-    return f"radar_{F_LOW_GHZ}_{F_HIGH_GHZ}_{int(frequency_points)}"
+    """MAROON's radar folder for a sweep of `frequency_points` over the band, e.g. radar_72.0_82.0_128."""
+    return maroon_radar_folder(F_LOW_GHZ, F_HIGH_GHZ, frequency_points)
 
 
 def frame_name(index: int) -> str:

@@ -70,6 +70,18 @@ class Backend:
         a backend may prepare the frame's inputs once."""
         return lambda points_m: self.correlate_summed(signal, freqs_hz, tx_m, rx_m, points_m)
 
+    def search_depth(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, plan, threshold_db, z_edges_are_grid_edges,
+                     hull_m=None):
+        """BP's coarse-to-fine search (`methods.skips.bp_search.search_depth`, `plan` its SearchPlan) where the data
+        lives: (depth_m, max projection, samples evaluated), or None where this backend leaves it to the host.
+        `hull_m` (K, 3): points whose box holds every point a frame's calls search (tables built once per frame)."""
+        return None
+
+    def coarse_peaks(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, step, hull_m=None):
+        """The coarse ROI's pass where the data lives: per pixel (x_m, y_m) the maximum of |V| over every step-th
+        depth of z_m and the last, the first depth index holding it, and the samples evaluated; or None (host)."""
+        return None
+
     def volume(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, method: str = "auto") -> np.ndarray:
         """complex64 (nz, ny, nx) frequency-summed phasors on the grid (axes in the order the vectors are given)."""
         raise NotImplementedError

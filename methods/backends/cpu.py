@@ -20,10 +20,10 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from methods.backends.base import Backend, check_inputs, grid_vectors
+from methods.domain.radar import C_M_PER_S
 from methods.ops.depth_peak import peak_depth_m
 from methods.ops.timing import StageTimer
 
-C_M_PER_S = 299_792_458.0
 CHUNK_POINTS = 2048     # most points per block: keeps the (chunk x 2*94) float32 work arrays in L2 cache
 
 

@@ -14,8 +14,8 @@ rx steering x tx steering (separable, so 188 sincos per point instead of 8836).
 Error: linear interpolation of a tone at nu cycles per sample loses at most (pi nu)^2 / 2 at half-sample offsets;
 the profile's band reaches nu = 1 / (2 Q), so the worst-case amplitude error is pi^2 / (8 Q^2) = 0.12 % at Q = 32;
 measured ~5e-4 relative against the float64 direct sum on random frames (tests: RANGE_CPU_REL_TOL = 2e-3).
-Cost (measured, notes/gpu.md): ~4-7x less than the per-frequency BLAS sum at 128 frequencies on the 2-core CPU;
-it pays from ~16 frequencies on (`worth_it`).
+Cost (measured, docs/measurements/gpu.md): ~4-7x less than the per-frequency BLAS sum at 128 frequencies on the 2-core
+CPU; it pays from ~16 frequencies on (`worth_it`).
 
 Layout: points in chunks of CHUNK_POINTS, and in each chunk the pairs in blocks of RX_BLOCK receive rows, arrays
 ordered (rx, tx, point) so that one pair's samples for all points of a chunk are gathered together (one cache
@@ -32,9 +32,9 @@ from threadpoolctl import threadpool_limits
 
 from methods.backends.cpu import path_excess_m as _path_excess_m
 from methods.backends.cpu import phasor_mod_2pi as _phasor_mod_2pi
+from methods.domain.radar import C_M_PER_S
 from methods.ops import range_compression
 
-C_M_PER_S = 299_792_458.0
 OVERSAMPLING = 32          # Q on the CPU (profile samples per frequency-grid bin)
 MIN_FREQS = 16             # from this many frequencies on, BP's CPU depth search uses range compression
 CHUNK_POINTS = 256         # points per chunk: (RX_BLOCK x 94 x 256) work arrays of ~1.5 MB stay in L2

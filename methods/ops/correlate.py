@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-C_M_PER_S = 299_792_458.0
+from methods.domain.radar import C_M_PER_S
 
 
 def correlate_reference(signal: np.ndarray, freqs_hz: np.ndarray, tx_m: np.ndarray, rx_m: np.ndarray,

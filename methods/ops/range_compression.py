@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-C_M_PER_S = 299_792_458.0
+from methods.domain.radar import C_M_PER_S
+
 OVERSAMPLING = 16          # Q: profile samples per grid bin
 RANGE_REL_TOL = 1e-2       # stated bound of ||range - direct|| / ||direct||
 RANGE_MIN_FREQS = 16       # from this many frequencies on, "auto" uses range compression on Warp devices
@@ -69,7 +70,7 @@ def worth_it(freqs_hz: np.ndarray) -> bool:
     """The Warp backend's choice for a volume with method "auto": range compression with many frequencies.
 
     The numpy backend keeps the per-frequency BLAS sum for volumes; BP's depth search on the CPU uses the numpy
-    range-compressed gather of `methods.backends.cpu_range` instead (measured faster there, notes/gpu.md).
+    range-compressed gather of `methods.backends.cpu_range` instead (measured faster there, docs/measurements/gpu.md).
     """
     return len(freqs_hz) >= RANGE_MIN_FREQS and plan(freqs_hz) is not None
 

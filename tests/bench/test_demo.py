@@ -17,7 +17,9 @@ def _fake_sweep(experiment, root, out, store, synth="realistic", distances_cm=No
     for name in demo.REPORT_FILES:
         (folder / name.format(table=experiment)).write_text(f"{experiment}\n")
     (folder / "depth_errors" / "01_plate_30_000000.png").write_bytes(b"png")
-    rows = pd.DataFrame({"object": ["01_plate"], "distance": [30], "method": ["mm2fsk"], "freq": ["d10"],
+    rows = pd.DataFrame({"object": ["01_plate"], "distance": [30], "frame": [0], "method": ["mm2fsk"], "freq": ["d10"],
+                         "prior": ["photogrammetry" if experiment == "table2" else "realsense"],
+                         "grid": ["from_capture"],
                          **{m: [0.1] for m in ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm")}, "timing": ["alone"],
                          "cached": [False]})
     rows.to_csv(folder / "results.csv", index=False)
@@ -70,7 +72,7 @@ def test_update_results_copies_tables_plots_and_baselines(monkeypatch, tmp_path)
     assert {p.name for p in results.iterdir()} == {"table1.csv", "table1.md", "table2", "table3", "agreement.md"}
     assert (results / "table3" / "runtime_vs_error.png").is_file()
     report = (results / "agreement.md").read_text()
-    assert "| MM-2FSK Δ10.0 | 1/1 | 0.10 | 0.82 |" in report                        # from the sweep rows
+    assert "| MM-2FSK Δ10.0 | 0/1 | 0.10 | 0.82 |" in report                        # from the sweep rows
     assert "## Placement against" in report and "| 01_plate | 30." in report       # measured on the capture
     assert (results / "table3" / "depth_errors" / "01_plate_30_000000.png").is_file()
     baseline = pd.read_csv(results / "table2" / "results.csv")

@@ -12,12 +12,12 @@ import pytest
 
 from bench.maroon.antennas import load_antenna_array
 from methods.backends import correlate, correlate_volume, resolve_device
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.correlate import C_M_PER_S, correlate_reference
 from methods.ops.range_compression import RANGE_REL_TOL
 
 from devices import CUDA
 
-ALL_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 ANT = load_antenna_array()
 
 
@@ -33,7 +33,7 @@ def rel_err(out, ref) -> float:
 
 def random_problem(rng, n_points: int, n_freqs: int):
     """Random complex frame, random frequency subset, random points in x, y in +-0.15 m, z in 0.2-0.6 m."""
-    freqs_hz = np.sort(rng.choice(ALL_FREQS_HZ, n_freqs, replace=False))
+    freqs_hz = np.sort(rng.choice(MAROON_FREQS_HZ, n_freqs, replace=False))
     signal = rng.standard_normal((94, 94, n_freqs)) + 1j * rng.standard_normal((94, 94, n_freqs))
     points_m = np.column_stack([rng.uniform(-0.15, 0.15, n_points), rng.uniform(-0.15, 0.15, n_points),
                                 rng.uniform(0.2, 0.6, n_points)])
@@ -122,7 +122,7 @@ def test_range_compressed_volume_within_stated_bound(device):
     rng = np.random.default_rng()
     n_freqs = int(rng.integers(16, 48))
     start = int(rng.integers(0, 128 - n_freqs))
-    freqs_hz = ALL_FREQS_HZ[start:start + n_freqs]
+    freqs_hz = MAROON_FREQS_HZ[start:start + n_freqs]
     signal = rng.standard_normal((94, 94, n_freqs)) + 1j * rng.standard_normal((94, 94, n_freqs))
     x_m, y_m, z_m = rng.uniform(-0.15, 0.15, 4), rng.uniform(-0.15, 0.15, 3), rng.uniform(0.2, 0.6, 2)
     fast = correlate_volume(signal, freqs_hz, ANT.tx_m, ANT.rx_m, x_m, y_m, z_m, device=device, method="range")
@@ -134,15 +134,15 @@ def test_range_compressed_volume_within_stated_bound(device):
 
 def test_auto_method_uses_range_compression_only_where_it_applies():
     from methods.ops.range_compression import worth_it
-    assert worth_it(ALL_FREQS_HZ)
-    assert not worth_it(ALL_FREQS_HZ[[0, 127]])      # 2 frequencies: direct
-    assert not worth_it(ALL_FREQS_HZ[::16] + np.r_[0, 1e6, 0, 0, 0, 0, 0, 0])  # off-grid
+    assert worth_it(MAROON_FREQS_HZ)
+    assert not worth_it(MAROON_FREQS_HZ[[0, 127]])      # 2 frequencies: direct
+    assert not worth_it(MAROON_FREQS_HZ[::16] + np.r_[0, 1e6, 0, 0, 0, 0, 0, 0])  # off-grid
 
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_point_target_peaks_at_its_position(device):
     rng = np.random.default_rng()
-    freqs_hz = ALL_FREQS_HZ[::8] if device == "cpu" else ALL_FREQS_HZ[::16]
+    freqs_hz = MAROON_FREQS_HZ[::8] if device == "cpu" else MAROON_FREQS_HZ[::16]
     x_m = np.linspace(-0.1, 0.1, 21)
     y_m = np.linspace(0.1, -0.1, 21)
     z_m = np.linspace(0.25, 0.45, 21)
@@ -159,7 +159,7 @@ def test_point_target_peaks_at_its_position(device):
 
 def test_bad_inputs_raise_clear_errors():
     with pytest.raises(ValueError, match="signal must have shape"):
-        correlate(np.zeros((94, 94, 2)), ALL_FREQS_HZ[:3], ANT.tx_m, ANT.rx_m, np.zeros((1, 3)))
+        correlate(np.zeros((94, 94, 2)), MAROON_FREQS_HZ[:3], ANT.tx_m, ANT.rx_m, np.zeros((1, 3)))
     with pytest.raises(ValueError, match="device must be one of"):
         resolve_device("gpu")
 

@@ -7,10 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from methods import reconstruct
-
-from devices import CUDA
-from methods_scenes import (
+from bench.synth.memory import (
     TABLE1_FREQS_HZ,
     make_capture,
     plane_depth_frame,
@@ -19,6 +16,9 @@ from methods_scenes import (
     simulate,
     square_grid,
 )
+from methods import reconstruct
+
+from devices import CUDA
 
 GRID = square_grid(0.02, 41)
 SLOPE_X = 0.05                                          # plate z = 0.30 + 0.05 x (3 degrees)

@@ -4,11 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.synth.memory import MAROON_FREQS_HZ, TABLE1_FREQS_HZ, make_capture, plate_points_m, simulate
 from methods import reconstruct
 from methods.bp import peak_depth_m
 from methods.domain.capture import RadarGrid
-
-from methods_scenes import MAROON_FREQS_HZ, TABLE1_FREQS_HZ, make_capture, plate_points_m, simulate
 
 TARGET_M = np.array([0.012, 0.020, 0.311])          # +x, +y, between two z samples
 GRID = RadarGrid((-0.03, -0.03, 0.26), (0.03, 0.03, 0.36), (31, 31, 51))     # 2 mm pixels and z steps

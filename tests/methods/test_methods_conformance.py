@@ -14,12 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from methods import Method, reconstruct
-from methods.method import MethodError
-from methods.registry import BUILTIN, make_method, method_class
-
-from devices import CUDA
-from methods_scenes import (
+from bench.synth.memory import (
     TABLE1_FREQS_HZ,
     make_capture,
     plane_depth_frame,
@@ -28,6 +23,11 @@ from methods_scenes import (
     simulate,
     square_grid,
 )
+from methods import Method, reconstruct
+from methods.method import MethodError
+from methods.registry import BUILTIN, make_method, method_class
+
+from devices import CUDA
 
 GRID = square_grid(0.003, 7, 0.29, 0.31, 11)            # 7 x 7 pixels of 1 mm; BP: 11 depths of 2 mm
 SLOPE_X = 0.05                                          # plate z = 0.30 + 0.05 x
@@ -138,7 +138,7 @@ def test_a_method_of_ones_own_runs_from_the_command_line_and_gets_its_label(synt
     rows = pd.read_csv(out / "results.csv")
     assert set(rows.method) == {"prior_only"} and set(rows.label) == {"Prior only"} and rows.valid_px.min() > 100
     from bench.report.tables import summarise
-    assert list(summarise(rows).row) == ["Prior only Δ10.0"]
+    assert list(summarise(rows).row) == ["Prior only (no radar)"]
     bad = _bench("dataset=maroon", f"dataset.root={synth_root}", "method=custom", "method._target_=nowhere.Mine",
                  "store.dir=null", f"hydra.run.dir={tmp_path / 'bad'}")
     assert bad.returncode == 2 and "Traceback" not in bad.stderr

@@ -7,10 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.synth.memory import TABLE1_FREQS_HZ, make_capture, simulate
 from methods import reconstruct
 from methods.domain.capture import Mesh, RadarGrid
-
-from methods_scenes import TABLE1_FREQS_HZ, make_capture, simulate
 
 TARGET_M = np.array([0.012, 0.020, 0.311])
 GRID = RadarGrid((-0.03, -0.03, 0.26), (0.03, 0.03, 0.36), (31, 31, 51))     # 2 mm pixels

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.frequencies import (
     CONFIGS_GHZ,
     config_indices,
@@ -11,8 +12,6 @@ from methods.ops.frequencies import (
     max_unambiguous_depth_m,
     select_frequencies,
 )
-
-MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 
 
 @pytest.mark.parametrize("name, indices, dd_max_cm", [

@@ -9,11 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.synth.memory import ANTENNAS, TABLE1_FREQS_HZ, add_noise, make_capture, plate_points_m, simulate, square_grid
 from methods import reconstruct
 from methods.mm2fsk import reconstruct_mm2fsk
 from methods.ops.frequencies import config_indices, max_unambiguous_depth_m
-
-from methods_scenes import ANTENNAS, TABLE1_FREQS_HZ, add_noise, make_capture, plate_points_m, simulate, square_grid
 
 PLATE_Z_M = 0.30
 GRID = square_grid(0.01, 21)

@@ -8,10 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from methods import reconstruct
-from methods.ops.frequencies import config_indices, max_unambiguous_depth_m
-
-from methods_scenes import (
+from bench.synth.memory import (
     TABLE1_FREQS_HZ,
     make_capture,
     plane_depth_frame,
@@ -20,6 +17,8 @@ from methods_scenes import (
     simulate,
     square_grid,
 )
+from methods import reconstruct
+from methods.ops.frequencies import config_indices, max_unambiguous_depth_m
 
 PLATE_Z_M = 0.30
 GRID = square_grid(0.01, 21)
@@ -68,7 +67,7 @@ def test_mm3fsk_wraps_beyond_the_coarse_pairs_range(plate_signal, config, error_
 def test_mm3fsk_noisy_coarse_corrections_do_not_reach_the_fine_step(plate_signal):
     # at 0 dB SNR each pixel's 0.55 GHz correction is off by millimetres to centimetres; the one median offset is
     # not (measured: offset -4.70 cm for a -5 cm error, every depth within 0.8 mm)
-    from methods_scenes import add_noise
+    from bench.synth.memory import add_noise
     mm3 = reconstruct(_miscalibrated(add_noise(plate_signal, 0.0), -0.05), "mm3fsk", "d05_d10", prior="realsense")
     assert mm3.extra["prior_offset_m"] == pytest.approx(-0.05, abs=5e-3)
     assert np.nanmax(np.abs(mm3.depth_m - PLATE_Z_M)) < 1.5e-3 and mm3.valid.sum() > 0.9 * mm3.valid.size

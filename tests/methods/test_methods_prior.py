@@ -6,11 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.synth.memory import CAMERA, plane_depth_frame, realsense2radar, square_grid
 from methods.domain.capture import Mesh
 from methods.prior.priors import mesh_prior_m, realsense_prior_m
 from methods.prior.raster import fill_convex_hull, rasterize_nearest_z
-
-from methods_scenes import CAMERA, plane_depth_frame, realsense2radar, square_grid
 
 GRID = square_grid(0.15, 301)            # the paper's 301 x 301 pixels over +-15 cm
 PLANE = (0.31, 0.2, -0.15)              # z = z0 + sx x + sy y in radar space, metres

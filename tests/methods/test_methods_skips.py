@@ -11,6 +11,15 @@ import dataclasses
 import numpy as np
 import pytest
 
+from bench.synth.memory import (
+    ANTENNAS,
+    MAROON_FREQS_HZ,
+    TABLE1_FREQS_HZ,
+    add_noise,
+    make_capture,
+    plate_points_m,
+    simulate,
+)
 from methods import reconstruct
 from methods.backends import correlate_volume
 from methods.backends.cpu_range import correlate_range, path_bounds_m, range_table
@@ -27,7 +36,6 @@ from methods.skips.roi import dilate, full_roi, roi_from_mask_bb
 from methods.skips.settings import ALL, NONE, SkipSettings, default_for, resolve
 
 from devices import CUDA
-from methods_scenes import ANTENNAS, MAROON_FREQS_HZ, TABLE1_FREQS_HZ, add_noise, make_capture, plate_points_m, simulate
 
 GRID = RadarGrid((-0.02, -0.02, 0.27), (0.02, 0.02, 0.35), (21, 21, 81))        # 2 mm pixels, 1 mm depth steps
 SCATTERERS_M = np.array([[0.004, -0.006, 0.300], [-0.010, 0.008, 0.318], [0.012, 0.010, 0.290]])
@@ -102,7 +110,7 @@ def test_roi_settings():
     with pytest.raises(ValueError, match="roi must be one of"):
         resolve("most")
     assert ALL.only("fsk_keep") == dataclasses.replace(NONE, fsk_keep=True)
-    # Warp devices: the dense kernels beat the host-driven searches for few frequencies (notes/gpu.md)
+    # Warp devices: the dense kernels beat the host-driven searches for few frequencies (docs/measurements/gpu.md)
     assert resolve("auto", "bp", 2, True) == SkipSettings(mask_bb=True) == default_for("2fsk", 2, True)
     assert default_for("bp", 128, True).bp_coarse_to_fine and default_for("2fsk", 2, False).fsk_keep
     assert SkipSettings().lattice_px(0.001) == (3, 5) and SkipSettings().lattice_px(0.006)[0] == 1   # no lattice

@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import LinearNDInterpolator
 
+from bench.synth.memory import CAMERA, plane_depth_frame, realsense2radar, square_grid
 from methods.prior.priors import delaunay_fill, realsense_prior_m
-
-from methods_scenes import CAMERA, plane_depth_frame, realsense2radar, square_grid
 
 GRID = square_grid(0.15, 301)            # 301 x 301 pixels of 1 mm over +-15 cm
 

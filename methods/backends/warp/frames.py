@@ -11,9 +11,9 @@ import warp as wp
 
 from methods.backends.warp import table_kernels
 from methods.backends.warp.correlation_kernels import MAX_ANTENNAS, TC2_HALF, TC2_KP, TC2_PAD, TC_ANT, TX_CHUNK
+from methods.domain.radar import C_M_PER_S
 from methods.ops import range_compression
 
-C_M_PER_S = 299_792_458.0
 FRAME_CACHE_SIZE = 4
 CONSTANTS_KEPT = 16            # antenna / frequency layouts kept (a sweep uses one array and a few configurations)
 _CONSTANTS: dict = {}

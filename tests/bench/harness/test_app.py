@@ -107,7 +107,8 @@ def test_experiments_sweep_the_papers_cells():
     assert table3 == ([("bp", f, "none", "paper") for f in ("full", "d05", "d1", "d10")]
                       + [("2fsk", f, "none", "from_capture") for f in ("d05", "d1", "d10")]
                       + [("3fsk", f, "none", "from_capture") for f in ("d05_d10", "d1_d10", "d2_d10")]
-                      + [("mm2fsk", f, "realsense", "from_capture") for f in ("d05", "d1", "d10")])
+                      + [("mm2fsk", f, "realsense", "from_capture") for f in ("d05", "d1", "d10")]
+                      + [("prior_only", "d10", "realsense", "from_capture")])       # the depth camera alone
     runtime = _experiment_cells("runtime")
     assert set(table3) < set(runtime) and len(runtime) == len(set(runtime)) == 7 + 6 + 3 + 6 + 3 + 1
     beyond = _experiment_cells("beyond")        # Table III, MM-3FSK x 3 and the prior-only baseline

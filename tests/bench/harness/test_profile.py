@@ -56,10 +56,9 @@ def test_faithful_filter_keeps_pixels_by_the_first_frequencys_magnitude():
     """Two scatterers 3.1 mm apart in depth interfere differently at the two frequencies, so |c1| and the mean
     phasor rank pixels differently; the kept pixels must be exactly those the definition picks, computed here from
     a float64 direct sum over the antenna pairs."""
+    from bench.synth.memory import ANTENNAS, MAROON_FREQS_HZ, simulate, square_grid
     from methods.mm2fsk import reconstruct_mm2fsk
     from methods.ops.frequencies import config_indices
-
-    from methods_scenes import ANTENNAS, MAROON_FREQS_HZ, simulate, square_grid
 
     freqs_hz = MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, "d10")]
     points_m = np.array([[0.004, -0.002, 0.300], [-0.006, 0.003, 0.3031], [0.001, 0.008, 0.2985]])

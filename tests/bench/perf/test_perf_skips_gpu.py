@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from bench.perf.skips_gpu import agreement, new_frame
+from bench.synth.memory import make_capture, square_grid
 from methods.domain.capture import CameraIntrinsics, DepthFrame
-
-from methods_scenes import make_capture, square_grid
 
 ROOT = Path(__file__).resolve().parents[3]
 

@@ -12,12 +12,11 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from bench.maroon import reader as maroon
+from bench.synth.memory import make_capture, square_grid
 from methods.domain.capture import Mesh, RadarGrid
 from methods.domain.errors import DatasetError
 from methods.domain.lattice import triangulated_vertices
 from metrics.evaluate import METRIC_COLUMNS, TRIANGULATION_THRESHOLD_M, evaluate, ground_truth
-
-from methods_scenes import make_capture, square_grid
 
 FAST = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 GRID = RadarGrid((-0.15, -0.15, 0.25), (0.15, 0.15, 0.40), (301, 301, 151))

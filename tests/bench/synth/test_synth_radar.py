@@ -13,13 +13,13 @@ from bench.maroon.antennas import load_antenna_array
 from bench.synth import SynthConfig, ensure_capture, generate_catalogue, simulate_frame
 from bench.synth import generate as generate_module
 from bench.synth.meshes import extrude_strip, indexed, triangle_normals
-from bench.synth.radar_model import noise_frame
+from bench.synth.radar.model import noise_frame
 from bench.synth.sampling import visible_samples
 from bench.synth.scenes import CATALOGUE, build_scene
 from methods.domain.capture import RadarGrid
+from methods.domain.radar import C_M_PER_S, MAROON_FREQS_HZ
 from methods.ops.correlate import correlate_reference
 
-C_M_PER_S = 299_792_458.0
 RADAR_DIR = "radar_72.0_82.0_128"
 FAST = SynthConfig(frequency_points=16)       # ~1 s per capture: for layout, determinism and caching tests
 
@@ -41,7 +41,7 @@ def test_point_scatterers_match_float64_formula(equidistant):
     """Tolerance: max |s - s_ref| / max |s_ref| < 1e-5 (complex64 output, phasor recursion re-seeded every 16)."""
     rng = np.random.default_rng(1)
     antennas = load_antenna_array(all_elements=True)
-    freqs = np.linspace(72e9, 82e9, 128) if equidistant else np.sort(rng.uniform(72e9, 82e9, 24))
+    freqs = MAROON_FREQS_HZ if equidistant else np.sort(rng.uniform(72e9, 82e9, 24))
     points = rng.uniform([-0.1, -0.1, 0.25], [0.1, 0.1, 0.55], (3, 3))
     amplitudes = rng.normal(size=3) + 1j * rng.normal(size=3)
     frame = simulate_frame(points, amplitudes, antennas.tx_m, antennas.rx_m, freqs)
@@ -107,7 +107,7 @@ def test_frame_files_layout(synth_root):
         frame = _load(radar / "calibrated_data" / f"000000{suffix}.npy")
         assert set(frame) == {"xr", "fvec", "number_of_measurements", "timestamp_us"}
         assert frame["xr"].shape == (96, 96, 128) and frame["xr"].dtype == np.complex64
-        assert frame["fvec"].dtype == np.float64 and np.array_equal(frame["fvec"], np.linspace(72e9, 82e9, 128))
+        assert frame["fvec"].dtype == np.float64 and np.array_equal(frame["fvec"], MAROON_FREQS_HZ)
         assert frame["number_of_measurements"] == 1
         assert frame["timestamp_us"].shape == (1,) and frame["timestamp_us"].dtype == np.int64
     text = (radar / "calibration.json").read_text()
@@ -219,7 +219,7 @@ def test_expected_files_exist(tmp_path):
     expected = {"metadata.json", "alignment.json", "radar_72.0_82.0_16/calibration.json",
                 "realsense/calibration.json", "realsense/timestamps.txt",
                 "photogrammetry/mesh_masked_smoothed.obj",
-                # what MAROON's reference loader looks for beside our ground truth (bench/synth/photogrammetry.py)
+                # what MAROON's reference loader looks for beside our ground truth (synth/camera/photogrammetry.py)
                 "photogrammetry/mesh_masked.obj", "photogrammetry/cams.xml",
                 "photogrammetry/depth/synthetic_cam0.tif", "photogrammetry/rgb/synthetic_cam0.jpg"}
     for i in ("000000", "000001"):

@@ -7,10 +7,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.synth.memory import (
+    ANTENNAS,
+    CAMERA,
+    MAROON_FREQS_HZ,
+    plane_depth_frame,
+    realsense2radar,
+    simulate,
+    square_grid,
+)
 from methods.ops.frequencies import config_indices
 
 from devices import CUDA
-from methods_scenes import ANTENNAS, CAMERA, MAROON_FREQS_HZ, plane_depth_frame, realsense2radar, simulate, square_grid
 
 
 def _mm2fsk_setting(device):

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.synth.memory import ANTENNAS, MAROON_FREQS_HZ, add_noise, simulate, square_grid
 from methods.ops.frequencies import config_indices
 
 from devices import CUDA
-from methods_scenes import ANTENNAS, MAROON_FREQS_HZ, add_noise, simulate, square_grid
 
 DEVICES = ["warp-cpu", CUDA]
 

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.synth.memory import CAMERA, plane_depth_frame, realsense2radar, square_grid
 from methods.prior.priors import realsense_prior_m
 from methods.prior.raster import fill_convex_hull
 
 from devices import CUDA
-from methods_scenes import CAMERA, plane_depth_frame, realsense2radar, square_grid
 
 DEVICES = ["warp-cpu", CUDA]
 

@@ -16,14 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from methods import reconstruct
-from methods.backends import backend_for, correlate_volume
-from methods.domain.capture import Mesh, RadarGrid
-from methods.ops.depth_peak import peak_depth_m
-from methods.prior.priors import mesh_prior_m, realsense_prior_m
-
-from devices import CUDA
-from methods_scenes import (
+from bench.synth.memory import (
     CAMERA,
     TABLE1_FREQS_HZ,
     make_capture,
@@ -33,6 +26,13 @@ from methods_scenes import (
     simulate,
     square_grid,
 )
+from methods import reconstruct
+from methods.backends import backend_for, correlate_volume
+from methods.domain.capture import Mesh, RadarGrid
+from methods.ops.depth_peak import peak_depth_m
+from methods.prior.priors import mesh_prior_m, realsense_prior_m
+
+from devices import CUDA
 
 DEVICES = ["warp-cpu", CUDA]
 MAX_SILHOUETTE_PX = 3

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from bench.maroon.antennas import load_antenna_array
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.correlate import correlate_reference
 from methods.ops.range_compression import RANGE_REL_TOL
 
 from devices import CUDA
 
 ANT = load_antenna_array()
-ALL_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 
 
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
@@ -24,7 +24,7 @@ def test_range_gather_at_points_matches_the_float64_sum_and_the_volume(device):
     rng = np.random.default_rng()
     n_freqs = int(rng.integers(16, 40))
     start = int(rng.integers(0, 128 - n_freqs))
-    freqs_hz = ALL_FREQS_HZ[start:start + n_freqs]
+    freqs_hz = MAROON_FREQS_HZ[start:start + n_freqs]
     signal = (rng.standard_normal((94, 94, n_freqs)) + 1j * rng.standard_normal((94, 94, n_freqs))).astype(np.complex64)
     points_m = np.column_stack([rng.uniform(-0.15, 0.15, 7), rng.uniform(-0.15, 0.15, 7), rng.uniform(0.2, 0.6, 7)])
     got = backend.correlate_summed(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m)
@@ -45,7 +45,7 @@ def test_summed_at_points_is_correlate_summed_on_one_frame(device):
 
     backend = backend_for(device)
     rng = np.random.default_rng()
-    for freqs_hz in (ALL_FREQS_HZ[[3, 90]], ALL_FREQS_HZ[::6]):          # two frequencies; many (range on Warp)
+    for freqs_hz in (MAROON_FREQS_HZ[[3, 90]], MAROON_FREQS_HZ[::6]):          # two frequencies; many (range on Warp)
         signal = (rng.standard_normal((94, 94, len(freqs_hz)))
                   + 1j * rng.standard_normal((94, 94, len(freqs_hz)))).astype(np.complex64)
         evaluate = backend.summed_at_points(signal, freqs_hz, ANT.tx_m, ANT.rx_m)

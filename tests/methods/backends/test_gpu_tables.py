@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.synth.memory import ANTENNAS
+
 from devices import CUDA
-from methods_scenes import ANTENNAS
 
 
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])

@@ -1,6 +1,10 @@
-"""Tiny analytic scenes for the method tests: point scatterers -> S[r, t, f], and in-memory Captures.
+"""Scenes built in memory, no files and no Open3D: the one place the tests, the stress suite and the benchmarks
+build analytic radar frames, depth-camera frames and Captures.
 
-S[r, t, f] = sum_k a_k exp(-j 2 pi f (|p_k - rx_r| + |p_k - tx_t|) / c), with the packaged QAR50 antennas.
+`simulate`: S[r, t, f] = sum_k a_k exp(-j 2 pi f (|p_k - rx_r| + |p_k - tx_t|) / c) with the packaged QAR50
+antennas and no path loss (the generator's model with path loss and lobes is `bench.synth.simulate_frame`);
+`make_capture` wraps a frame (and optionally a depth frame, mesh, transforms) as a `Capture`; `CAMERA`,
+`realsense2radar` and `plane_depth_frame` give a RealSense-like depth image of a plane.
 """
 from __future__ import annotations
 
@@ -11,10 +15,10 @@ import numpy as np
 from bench.maroon.antennas import load_antenna_array
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import CameraIntrinsics, Capture, DepthFrame, Mesh, Metadata, RadarFrame, RadarGrid
+from methods.domain.radar import MAROON_FREQS_HZ
 from methods.ops.correlate import C_M_PER_S
 
 ANTENNAS = load_antenna_array()
-MAROON_FREQS_HZ = np.linspace(72e9, 82e9, 128)
 TABLE1_FREQS_HZ = MAROON_FREQS_HZ[[0, 25, 75, 101, 114, 120, 127]]   # every frequency of Table I and 3FSK
 
 
@@ -54,12 +58,14 @@ def square_grid(half_xy_m: float, n_xy: int, z_lo_m: float = 0.25, z_hi_m: float
 
 
 def make_capture(signal: np.ndarray, freqs_hz: np.ndarray, grid: RadarGrid, *, realsense: DepthFrame | None = None,
-                 mesh: Mesh | None = None, transforms: dict[str, np.ndarray] | None = None) -> Capture:
+                 mesh: Mesh | None = None, transforms: dict[str, np.ndarray] | None = None, name: str = "scene",
+                 distance_cm: int = 30, mask_erosion: int = 0) -> Capture:
     """An in-memory Capture holding one radar frame (and optionally a depth frame / mesh)."""
     frame = RadarFrame(index=0, signal=signal, freqs_hz=np.asarray(freqs_hz, dtype=np.float64), timestamp_s=None,
                        grid=grid, path=Path("memory"))
-    metadata = Metadata(distance_m=0.3, mask_erosion=0, mask_bb_m={}, calibration=None, labels=(), raw={})
-    return Capture(root=Path("memory"), object_name="scene", distance_cm=30, metadata=metadata,
+    metadata = Metadata(distance_m=distance_cm / 100, mask_erosion=mask_erosion, mask_bb_m={}, calibration=None,
+                        labels=(), raw={})
+    return Capture(root=Path("memory"), object_name=name, distance_cm=distance_cm, metadata=metadata,
                    transforms=transforms or {}, antennas=ANTENNAS, radar_frames=[0], radar=frame,
                    realsense=realsense, mesh=mesh)
 
