@@ -26,7 +26,7 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
-from bench.harness import CONFIG_DIR, captures, stages
+from bench.harness import CONFIG_DIR, captures, stages, validate
 from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
@@ -459,6 +459,7 @@ def main(cfg: DictConfig) -> None:
     _isolate_warp_cache()
     try:
         cli.resolve_device(str(cfg.device), option="device=")   # before generating or reading anything
+        validate.check(cfg)                                       # every setting in its range (one line if not)
         if cfg.store.dir is not None:
             cli.check_creatable_dir(to_absolute_path(str(cfg.store.dir)), f"store.dir={cfg.store.dir}")
         started = time.perf_counter()

@@ -13,14 +13,15 @@ from __future__ import annotations
 import collections
 import dataclasses
 import functools
+import io
 import json
-import os
 from collections.abc import Callable
 from pathlib import Path
 
 import h5py
 import numpy as np
 
+from bench.harness import atomic
 from bench.harness.store import Store, code_version
 from bench.maroon import reader
 from bench.maroon.antennas import load_antenna_array
@@ -135,11 +136,11 @@ def ground_truth(capture_dir: Path, capture: Capture, with_mesh: Callable[[], Ca
 
 
 def _keep(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write the rasters atomically (temp file + rename): a reader never sees half a file."""
+    """Write the arrays whole or not at all (bench.harness.atomic, as the store writes its cells)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with h5py.File(tmp, "w") as h5:
+    image = io.BytesIO()
+    with h5py.File(image, "w") as h5:
         for name, values in arrays.items():
             h5.create_dataset(name, data=values, compression="gzip", compression_opts=1, shuffle=True)
         h5.attrs["made_by"] = json.dumps({"code": code_version()})
-    os.replace(tmp, path)
+    atomic.write_bytes(path, image.getvalue())

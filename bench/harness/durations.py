@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import socket
 from pathlib import Path
+
+from bench.harness import atomic
 
 
 def configuration_id(cell: dict) -> str:
@@ -41,6 +42,4 @@ class Durations:
         known = self._read()
         known[configuration] = seconds_per_frame
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(known))
-        os.replace(tmp, self.path)
+        atomic.write_bytes(self.path, json.dumps(known).encode())

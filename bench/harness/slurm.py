@@ -3,6 +3,8 @@
 `hydra/launcher=slurm_cpu` / `slurm_gpu` (configs/hydra/launcher/) use `CheckedSlurmLauncher`, which, in the
 submitting process and before anything is submitted:
 
+* ends in one line where SLURM's commands are not on PATH (a machine without SLURM), and where any job's setting
+  is out of range (bench.harness.validate), before any data is prepared;
 * checks that the sweep directory, the store, the dataset root and submitit's folder are absolute-able paths on a
   file system the nodes can share (not /tmp, /var/tmp, /dev/shm, /run or a tmpfs: a node's private disk), unless
   `BENCH_SLURM_LOCAL_PATHS=1` (a single-node cluster); the jobs get them as absolute paths, so a job that starts in
@@ -31,6 +33,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 import time
@@ -43,11 +46,13 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from submitit.core.utils import FailedJobError, UncompletedJobError
 
 from bench import cli
+from bench.harness import validate
 from bench.harness.identity import params_string
 from bench.harness.slurm_resources import job_mem_gb
 from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
 
+SLURM_NEEDED = ("sbatch", "srun", "squeue", "scancel")   # submit, submitit's job script, wait, cancel
 LOCAL_PREFIXES = ("/tmp", "/var/tmp", "/dev/shm", "/run")
 LOCAL_FS_TYPES = {"tmpfs", "ramfs", "devtmpfs"}
 POLL_S = 2.0
@@ -84,6 +89,16 @@ def _mount_type(path: Path) -> str:
     except OSError:
         return ""
     return kind
+
+
+def check_slurm_commands(launcher: str) -> None:
+    """One error line (exit 2) before anything is prepared where SLURM's commands are not on PATH (a machine that
+    is not a SLURM submit host): which are missing, and how to run the sweep here instead."""
+    missing = [command for command in SLURM_NEEDED if shutil.which(command) is None]
+    if missing:
+        cli.fail(f"hydra/launcher={launcher}: SLURM's {', '.join(missing)} not found on PATH (this machine is not a "
+                 "SLURM submit host); run the sweep on this machine with hydra/launcher=local (parallel jobs) or "
+                 "without hydra/launcher (one job after another)")
 
 
 def check_shared(path: Path, what: str) -> None:
@@ -249,12 +264,17 @@ class CheckedSlurmLauncher(SlurmLauncher):
     def launch(self, job_overrides, initial_job_idx: int) -> list[JobReturn]:
         import submitit
 
+        check_slurm_commands(self.config.hydra.runtime.choices.get("hydra/launcher") or "slurm")
         paths = self._paths()
         try:
             for key, path in paths.items():
                 check_shared(path, key)
         except cli.UserError as err:
             cli.fail(str(err))
+        absolute = [f"hydra.sweep.dir={paths['hydra.sweep.dir']}", f"dataset.root={paths['dataset.root']}"]
+        if "store.dir" in paths:
+            absolute.append(f"store.dir={paths['store.dir']}")
+        job_configs = self._job_configs(job_overrides, initial_job_idx, absolute)
         self._prepare_data()
         if "store.dir" in paths:
             os.environ.setdefault("WARP_CACHE_PATH", str(paths["store.dir"] / "warp-cache"))
@@ -270,16 +290,9 @@ class CheckedSlurmLauncher(SlurmLauncher):
             print(f"cpus_per_task={cpus} is more than a node of the partition has ({available}): using {available}",
                   flush=True)
             cpus = available
-        absolute = [f"hydra.sweep.dir={paths['hydra.sweep.dir']}", f"dataset.root={paths['dataset.root']}"]
-        if "store.dir" in paths:
-            absolute.append(f"store.dir={paths['store.dir']}")
         paths["hydra.sweep.dir"].mkdir(parents=True, exist_ok=True)
         jobs, self._mem_gb = [], {}
-        for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
-            overrides = [*overrides, *absolute]
-            cfg = self.hydra_context.config_loader.load_sweep_config(self.config, overrides)
-            with open_dict(cfg.hydra.job):
-                cfg.hydra.job.num = idx          # the job folder's name (hydra.sweep.subdir) needs it
+        for idx, overrides, cfg in job_configs:
             cell = cfg.hydra.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
             params = params_string(list(cfg.hydra.overrides.task))        # a parameter sweep's jobs apart
             cell += f"-{params.replace(' ', ',')}" if params else ""
@@ -304,6 +317,23 @@ class CheckedSlurmLauncher(SlurmLauncher):
         if missing:
             self._report_missing(missing)
         return returns
+
+    def _job_configs(self, job_overrides, initial_job_idx: int, absolute: list[str]
+                     ) -> list[tuple[int, list, DictConfig]]:
+        """(job number, overrides, configuration) of every job, each checked (bench.harness.validate) before any
+        data is prepared or any job submitted: one line and exit 2 for the first setting out of range."""
+        configs = []
+        for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
+            overrides = [*overrides, *absolute]
+            cfg = self.hydra_context.config_loader.load_sweep_config(self.config, overrides)
+            try:
+                validate.check(cfg, memory=False)        # the nodes' memory is not this machine's
+            except cli.UserError as err:
+                cli.fail(str(err))
+            with open_dict(cfg.hydra.job):
+                cfg.hydra.job.num = idx          # the job folder's name (hydra.sweep.subdir) needs it
+            configs.append((idx, overrides, cfg))
+        return configs
 
     def _wait(self, jobs) -> tuple[list[JobReturn], list[tuple[str, str]]]:
         """Results of the jobs that finished, and (cell, cause) of those that did not."""

@@ -313,13 +313,22 @@ def read_radar_frame(radar_dir: Path, index: int, grid: RadarGrid, empty_filtere
     return RadarFrame(index=index, signal=signal, freqs_hz=freqs_hz, timestamp_s=timestamp_s, grid=grid, path=path)
 
 
+MAX_DECLARED_FRAMES = 10 ** 9      # frames one capture may declare (MAROON's have 1-300)
+
+
 def declared_frame_count(radar_dir: Path, first_frame: int) -> int | None:
     """`number_of_measurements` of the first frame file (the reference loader reads it from frame 0)."""
     path = radar_dir / "calibrated_data" / f"{first_frame:06d}.npy"
     with safe_io.use_root(radar_dir.parent):
         count = load_pickled_dict(path).get("number_of_measurements")
     count = count.item() if isinstance(count, np.generic) else count
-    return count if isinstance(count, int) and not isinstance(count, bool) else None
+    if not isinstance(count, int) or isinstance(count, bool):
+        return None
+    if not 0 <= count <= MAX_DECLARED_FRAMES:     # a huge integer cannot even be printed (Python's 4300 digits)
+        digits = int(count.bit_length() * 0.30103)
+        found = str(count) if abs(count) < 10 ** 30 else f"an integer of about {digits} digits"
+        raise DatasetError(path, f"number_of_measurements must be 0..{MAX_DECLARED_FRAMES:,}, found {found}")
+    return count
 
 
 # ----------------------------------------------------------------------------------------------- realsense

@@ -9,6 +9,8 @@ rest of the merge).
 """
 from __future__ import annotations
 
+import csv
+import io
 from pathlib import Path
 
 import pandas as pd
@@ -18,6 +20,7 @@ from omegaconf import DictConfig
 from bench import cli
 from bench.harness.results import write_results
 from bench.report import tables
+from methods.domain.errors import DatasetError
 
 
 def job_files(root: Path, name: str) -> list[Path]:
@@ -25,12 +28,33 @@ def job_files(root: Path, name: str) -> list[Path]:
     return sorted(root.glob(f"*/{name}"), key=lambda p: int(p.parent.name.split("_")[0]))
 
 
+def read_job_rows(path: Path) -> pd.DataFrame:
+    """A job's results.csv, every line whole: a line cut mid-row (a job killed while appending it, a full disk) or
+    a row with another number of fields than the header is a DatasetError naming the file and line, never a row
+    read with its last values missing or cut short."""
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8")
+        lines = list(csv.reader(io.StringIO(text, newline="")))
+    except (UnicodeDecodeError, csv.Error) as err:
+        raise DatasetError(path, f"not a results table ({err})") from None
+    if not lines:
+        raise DatasetError(path, "is empty (the job wrote no row)")
+    if not data.endswith(b"\n"):
+        raise DatasetError(path, f"line {len(lines)} is cut mid-row (a job killed, or a disk full, while writing it): "
+                                 "run the sweep again (the store keeps the finished cells) or delete that line")
+    short = next((n for n, line in enumerate(lines[1:], 2) if len(line) != len(lines[0])), None)
+    if short is not None:
+        raise DatasetError(path, f"line {short} has {len(lines[short - 1])} fields, the header {len(lines[0])}")
+    return pd.read_csv(io.StringIO(text))
+
+
 def merge(root: Path) -> pd.DataFrame:
     """Concatenate `root/*/results.csv` (job order) into `root/results.csv` (atomic); returns the rows."""
     parts = job_files(root, "results.csv")
     if not parts:
         raise FileNotFoundError(f"{root}: no job wrote */results.csv")
-    rows = pd.concat([pd.read_csv(p) for p in parts], ignore_index=True)
+    rows = pd.concat([read_job_rows(p) for p in parts], ignore_index=True)
     return write_results(root / "results.csv", rows.to_dict("records"))
 
 
@@ -73,7 +97,13 @@ class MergeResults(Callback):
     """Hydra callback (configs/config.yaml `hydra.callbacks.merge`): `report` at the end of every multirun."""
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
-        report(Path(config.hydra.sweep.dir), config.report.table, config.report.get("depth_errors", False))
+        try:
+            report(Path(config.hydra.sweep.dir), config.report.table, config.report.get("depth_errors", False))
+        except Exception as err:   # noqa: BLE001 -- a file or disk problem in one line (bench.cli); bugs re-raised
+            message = cli.error_line(err)
+            if message is None:
+                raise
+            cli.fail(message)
 
 
 def main() -> int:

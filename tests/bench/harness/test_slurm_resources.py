@@ -55,11 +55,15 @@ def test_mem_gb_setting():
 
 def test_launcher_asks_sbatch_for_the_cells_memory(synth_root, tmp_path):
     """The SLURM preset end to end up to sbatch (a stand-in that only answers with a job id): each job's submission
-    script asks for its cell's memory, 2 GB more with a GPU."""
+    script asks for its cell's memory, 2 GB more with a GPU. Every SLURM command the launcher touches is a fake
+    (the session's PATH has none: tests/conftest.py)."""
     fake = tmp_path / "bin"
     fake.mkdir()
     (fake / "sbatch").write_text('#!/bin/sh\necho "Submitted batch job $$"\n')
     (fake / "squeue").write_text("#!/bin/sh\necho 1\n")          # jobs stay listed: the launcher waits for them
+    (fake / "sinfo").write_text("#!/bin/sh\necho 16\n")         # CPUs of a node: cpus_per_task is not clipped
+    for name in ("srun", "scancel"):                             # looked for before submitting; never run here
+        (fake / name).write_text("#!/bin/sh\nexit 0\n")
     for tool in fake.iterdir():
         tool.chmod(0o755)
     env = {**os.environ, "PATH": f"{fake}:{os.environ['PATH']}", "BENCH_SLURM_LOCAL_PATHS": "1"}

@@ -11,14 +11,18 @@ from bench.harness.app import CONFIG_DIR, run
 from bench.harness.results import MEASURED_COLUMNS
 from bench.harness.store import Store, capture_files, code_version
 
+ROW = {"key": "abc", "object": "01_plate", "distance": 30, "frame": 0, "method": "bp", "valid_px": 12,
+       "runtime_ms": 1.5, "timing": "alone", "P_cm": 0.25}
+GRID_ATTRS = {"bb_min_m": [-0.1, -0.1, 0.2], "bb_max_m": [0.1, 0.1, 0.4], "grid_size": [4, 3, 1]}
+
 
 def test_put_get_round_trip_and_no_partial_cell(tmp_path):
     store = Store(tmp_path)
     arrays = {"depth_m": np.full((3, 4), 0.3), "magnitude": np.ones((3, 4)), "gt_depth_m": np.full((3, 4), np.nan)}
     assert store.get("abc") is None
-    store.put("abc", {"P_cm": 0.25}, arrays, {"grid_size": [4, 3, 1]})
+    store.put("abc", ROW, arrays, GRID_ATTRS)
     row, back, attrs = store.get("abc")
-    assert row == {"P_cm": 0.25} and list(attrs["grid_size"]) == [4, 3, 1]
+    assert row == ROW and list(attrs["grid_size"]) == [4, 3, 1]
     assert (back["depth_m"] == 0.3).all()
     assert np.isnan(back["gt_depth_m"]).all()
     assert sorted(p.name for p in (tmp_path / "cells").iterdir()) == ["abc.h5", "abc.json"]   # no temp files left
