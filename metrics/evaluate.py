@@ -124,8 +124,10 @@ def pixel_pitch_mm(grid: RadarGrid) -> float:
     return 1000.0 * min(pitches) if pitches else MAROON_RADAR_PITCH_MM
 
 
-def ground_truth(capture: Capture, grid: RadarGrid) -> GroundTruth:
-    """Rasterise the capture's photogrammetry mesh (through `photogrammetry2radar`) onto `grid`."""
+def ground_truth_rasters_m(capture: Capture, grid: RadarGrid) -> tuple[np.ndarray, np.ndarray]:
+    """The capture's photogrammetry mesh (through `photogrammetry2radar`) rasterised onto `grid`: depth (m, NaN =
+    no surface) at the pixel centres and at MAROON's sample positions (the faithful profile's); the costly part of
+    `ground_truth`, which a caller may keep (bench.harness.captures)."""
     if capture.mesh is None:
         raise ValueError(f"{capture.path}: no photogrammetry mesh, metrics need ground truth")
     if "photogrammetry2radar" not in capture.transforms:
@@ -133,16 +135,28 @@ def ground_truth(capture: Capture, grid: RadarGrid) -> GroundTruth:
     vertices_m = apply_transform(capture.transforms["photogrammetry2radar"], capture.mesh.vertices)
     depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid)
     reference_depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid, xy_m=maroon_sample_xy_m(grid))
-    mask_bb_m = capture.metadata.mask_bb_m
+    return depth_m, reference_depth_m
+
+
+def ground_truth(capture: Capture, grid: RadarGrid) -> GroundTruth:
+    """Rasterise the capture's photogrammetry mesh (through `photogrammetry2radar`) onto `grid`."""
+    return ground_truth_from_rasters(*ground_truth_rasters_m(capture, grid), grid, capture.metadata)
+
+
+def ground_truth_from_rasters(depth_m: np.ndarray, reference_depth_m: np.ndarray, grid: RadarGrid, metadata
+                              ) -> GroundTruth:
+    """The ground truth from `ground_truth_rasters_m`'s two depth maps and the capture's metadata (mask_bb,
+    erosion): points, silhouettes and masks."""
+    mask_bb_m = metadata.mask_bb_m
     points_m = _pixel_points_m(grid, np.nan_to_num(depth_m))
     on_object = np.isfinite(depth_m) & inside_mask_bb(points_m.reshape(-1, 3), mask_bb_m).reshape(depth_m.shape)
     used = triangulated_vertices(depth_m, TRIANGULATION_THRESHOLD_M) & on_object
-    kernel_px = kernel_px_for_pitch(erosion_kernel_mm(capture.metadata.mask_erosion), pixel_pitch_mm(grid))
+    kernel_px = kernel_px_for_pitch(erosion_kernel_mm(metadata.mask_erosion), pixel_pitch_mm(grid))
     silhouette = close_mask(on_object, kernel_px)
-    reference = _reference_ground_truth(reference_depth_m, grid, reference_mask_bb_m(capture.metadata))
+    reference = _reference_ground_truth(reference_depth_m, grid, reference_mask_bb_m(metadata))
     return GroundTruth(grid=grid, depth_m=depth_m, points=PointSet(points_m[used]), silhouette=silhouette,
                        eroded_silhouette=erode_mask(silhouette, kernel_px), mask_bb_m=mask_bb_m,
-                       mask_erosion=capture.metadata.mask_erosion,
+                       mask_erosion=metadata.mask_erosion,
                        reference=reference)
 
 

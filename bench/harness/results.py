@@ -4,6 +4,7 @@ from __future__ import annotations
 import functools
 import io
 import json
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,8 @@ from bench.harness import atomic
 from bench.maroon.images import PNG_COMPRESS_LEVEL, write_uint16_png
 from methods.domain.capture import RadarGrid
 
+#: what a run measures rather than computes (two runs of one cell differ in them): runtimes and their conditions
+MEASURED_COLUMNS = ["runtime_ms", "runtime_runs", "cpu_ms", "call_ms", "load_1m", "timing"]
 RESULT_COLUMNS = ["object", "distance", "frame", "method", "freq", "prior", "f_GHz", "C_g_cm", "C_s_cm", "P_cm",
                   "P_e_cm", "valid_px", "runtime_ms", "device", "timing"]
 
@@ -120,3 +123,24 @@ class ResultsCsv:
             return
         atomic.append_bytes(self.path, pd.DataFrame([row], columns=self.columns).to_csv(header=False, index=False)
                             .encode())
+
+
+class BackgroundWriter:
+    """Output files written on one background thread, in the order given, while the caller computes the next
+    capture (PNG compression, HDF5 and file writes release the interpreter lock). `close` waits for them; the first
+    error a write raised is raised by the next `submit` or by `close`, so a failed write still fails the run."""
+
+    def __init__(self):
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="outputs")
+        self._pending: list[Future] = []
+
+    def submit(self, function, *args) -> None:
+        self._pending = [future for future in self._pending if not (future.done() and future.result() is None)]
+        self._pending.append(self._pool.submit(function, *args))
+
+    def close(self) -> None:
+        try:
+            for future in self._pending:
+                future.result()
+        finally:
+            self._pool.shutdown(wait=True)

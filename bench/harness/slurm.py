@@ -12,8 +12,9 @@ submitting process and before anything is submitted:
 * generates the synthetic captures the sweep needs, once (jobs then find them cached and never generate);
 * points every job at one Warp kernel cache beside the store (`WARP_CACHE_PATH`; Warp >= 1.2 builds into a temp
   folder and renames it, so concurrent jobs may share it), instead of one /tmp folder per job;
-* sizes each cell's job: its name (`bench-<cell>`), GPUs (1 for device=cuda, none otherwise), CPUs per task
-  (at most what a node of the partition has: more would leave the job pending forever), with `mem_gb: 0` its
+* sizes each cell's job: its name (`bench-<cell>`, `bench-<cell>-offset_mm=2` with parameters), GPUs (1 for
+  device=cuda, none otherwise), CPUs per task (at most what a node of the partition has: more would leave the job
+  pending forever), with `mem_gb: 0` its
   memory from the cell (bench.harness.slurm_resources), and, with `timeout_min: 0`, a time limit from the cell
   (`time_limit_min`).
 
@@ -46,6 +47,7 @@ from submitit.core.utils import FailedJobError, UncompletedJobError
 
 from bench import cli
 from bench.harness import validate
+from bench.harness.identity import params_string
 from bench.harness.slurm_resources import job_mem_gb
 from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
@@ -292,6 +294,8 @@ class CheckedSlurmLauncher(SlurmLauncher):
         jobs, self._mem_gb = [], {}
         for idx, overrides, cfg in job_configs:
             cell = cfg.hydra.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
+            params = params_string(list(cfg.hydra.overrides.task))        # a parameter sweep's jobs apart
+            cell += f"-{params.replace(' ', ',')}" if params else ""
             captures = len(cfg.dataset.captures) if cfg.dataset.captures is not None else _count(paths)
             timeout = int(self.params.get("timeout_min") or 0) or time_limit_min(cfg, captures)
             gpus = 1 if str(cfg.device) == "cuda" else None

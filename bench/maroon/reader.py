@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -457,7 +458,8 @@ def read_mesh(path: Path) -> Mesh:
 # ------------------------------------------------------------------------------------------------- capture
 def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, ...] = PARTS,
                  empty_filtered: bool = False, antennas: AntennaArray | None = None,
-                 limits: Limits | None = None, realsense_frame: int | None = None) -> Capture:
+                 limits: Limits | None = None, realsense_frame: int | None = None,
+                 mesh_reader: Callable[[Path], Mesh] | None = None) -> Capture:
     """Read one capture folder `root/object/distance` into a Capture.
 
     `frame` is the radar frame index (-1 = last, as MAROON evaluates); `parts` chooses what to load. The radar is
@@ -466,7 +468,8 @@ def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, 
     nearest in time to the radar frame (bench.maroon.frames; MAROON's last frame without timestamps). A moving object's
     mesh pose at the radar frame (`photogrammetry/poses/NNNNNN.json`, written by the synthetic sequences) replaces
     `photogrammetry2radar`. Every file must lie inside the capture's dataset root (bench.maroon.safe_io) and within
-    `limits` (default: bench.maroon.limits.current_limits()).
+    `limits` (default: bench.maroon.limits.current_limits()). `mesh_reader` reads the mesh file (default
+    `read_mesh`; the harness passes one that keeps parsed meshes by content, bench.harness.captures).
     """
     capture_dir = Path(capture_dir)
     unknown = set(parts) - set(PARTS)
@@ -482,7 +485,8 @@ def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, 
         if problem is not None:
             raise DatasetError(folder, f"cannot name a capture in results: {problem}")
     with use_limits(limits), safe_io.use_root(capture_dir):
-        return _read_capture(capture_dir, frame, parts, empty_filtered, antennas, realsense_frame)
+        return _read_capture(capture_dir, frame, parts, empty_filtered, antennas, realsense_frame,
+                             mesh_reader or read_mesh)
 
 
 def _check_erosion_kernel(capture_dir: Path, metadata: Metadata, grid: RadarGrid) -> None:
@@ -499,7 +503,8 @@ def _check_erosion_kernel(capture_dir: Path, metadata: Metadata, grid: RadarGrid
 
 
 def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
-                  antennas: AntennaArray | None, realsense_frame: int | None = None) -> Capture:
+                  antennas: AntennaArray | None, realsense_frame: int | None = None,
+                  mesh_reader: Callable[[Path], Mesh] = read_mesh) -> Capture:
     metadata = read_metadata(capture_dir)
     align_path = alignment_path(capture_dir, metadata)
     if not (align_path.exists() or align_path.is_symlink()):
@@ -537,7 +542,7 @@ def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_f
             capture.notes.append(f"{capture_dir / 'realsense'}: missing, no RealSense prior")
     if "mesh" in parts:
         if (capture_dir / "photogrammetry").is_dir():
-            capture.mesh = read_mesh(find_mesh(capture_dir / "photogrammetry"))
+            capture.mesh = mesh_reader(find_mesh(capture_dir / "photogrammetry"))
         else:
             capture.notes.append(f"{capture_dir / 'photogrammetry'}: missing, no ground truth")
     return capture

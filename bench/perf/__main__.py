@@ -11,6 +11,7 @@ COMMANDS = {
     "stream": ("stream", "a frame sequence read and reconstructed as a camera delivers it"),
     "sweep": ("sweep", "each cell of a sweep on one capture: methods against the harness around them"),
     "overhead": ("overhead", "what a sweep pays outside the methods, by stage"),
+    "experiment": ("experiment", "a whole experiment as a user runs it: wall time against methods + metrics, by stage"),
     "memory": ("memory", "peak memory of sweep cells against the SLURM memory model"),
     "fill": ("fill", "prior hole fills (scanline, delaunay) in runtime against error"),
     "skips": ("skips", "every skip off and on per catalogue object (CPU)"),

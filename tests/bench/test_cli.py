@@ -158,6 +158,10 @@ DOC_RUNS: dict[str, list[str]] = {
         ["{py} -m bench.perf overhead --help"],        # a whole table3; runs in test_perf_overhead
     ".venv/bin/python -m bench.perf overhead --results-frames 100 1000":
         ["{py} -m bench.perf overhead --results-frames 3 20 --out {tmp}"],
+    ".venv/bin/python -m bench.perf experiment table2 --root data/synthetic [--device cuda] [--repeat 2]":
+        ["{py} -m bench.perf experiment --help"],      # whole sweeps; a small one runs in test_perf_experiment
+    "python -m bench.perf experiment table2 --root data/synthetic [--device cuda]":
+        ["{py} -m bench.perf experiment --help"],
     # frame sequences: generating 10 frames takes minutes; test_frames runs a 3-frame sequence for real
     ".venv/bin/python -m bench.synth --out data/sequence --objects 04_bottle --distances 30 --frames 10 "
     "--motion lateral": ["{py} -m bench.synth --help"],

@@ -95,3 +95,15 @@ def test_the_reason_of_a_hydra_error_is_its_headline_or_exception():
                  '  File "bench/harness/app.py", line 1, in main', "RuntimeError: out of memory", "", hint]
     assert demo._reason(traceback) == "RuntimeError: out of memory"
     assert demo._reason(["warning: slow", "error: data/x: no captures found"]) == "data/x: no captures found"
+
+
+def test_the_demo_says_up_front_how_long_it_takes_and_which_step_is_long(tmp_path):
+    from bench.demo import demo_captures, plan
+
+    objects, _ = demo_captures([30])
+    missing = plan(tmp_path / "none", tmp_path / "store", [30])
+    assert f"generating {len(objects)} of {len(objects)} captures" in missing and "min on two quiet cores" in missing
+    assert "the long step is table3's BP_max" in missing and "reused" not in missing
+    (tmp_path / "store" / "cells").mkdir(parents=True)
+    (tmp_path / "store" / "cells" / "x.json").write_text("{}")
+    assert "are reused" in plan(tmp_path / "none", tmp_path / "store", [30])

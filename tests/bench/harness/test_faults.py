@@ -37,13 +37,14 @@ from omegaconf import OmegaConf
 from bench import cli
 from bench.harness import validate
 from bench.harness.app import CONFIG_DIR, run
+from bench.harness.results import MEASURED_COLUMNS
 from bench.harness.store import Store
 from bench.report.merge import merge
 from methods.domain.errors import DatasetError, UsageError
 
 from hostile_tools import REPO, copy_capture, frame_file, one_error_line, tree_digest
 
-VOLATILE = ("runtime_ms", "hostname", "cached", "timing")        # columns that differ between equal runs
+VOLATILE = (*MEASURED_COLUMNS, "hostname", "cached")             # columns that differ between equal runs
 
 
 def _overrides(root: Path, store: Path | None, *extra: str) -> list[str]:

@@ -10,7 +10,7 @@ import time
 import pytest
 from hydra import compose, initialize_config_dir
 
-from bench.harness import app, slurm_resources
+from bench.harness import captures, slurm_resources
 from bench.harness.app import CONFIG_DIR
 from bench.harness.slurm_resources import job_mem_gb, job_peak_mib
 from bench.perf.memory import job_peak_mib_measured
@@ -22,7 +22,7 @@ def _cfg(*overrides: str):
 
 
 def test_frames_held_bound_is_the_apps():
-    assert slurm_resources.CAPTURES_KEPT == app.CAPTURES_KEPT == app.GROUND_TRUTHS_KEPT
+    assert slurm_resources.CAPTURES_KEPT == captures.CAPTURES_KEPT == captures.GROUND_TRUTHS_KEPT
 
 
 @pytest.mark.parametrize("cell", [["cell=mm2fsk_d10"], ["cell=bp_d05", "grid=bp_cpu"]], ids=["mm2fsk", "bp_small"])

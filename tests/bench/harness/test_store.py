@@ -8,6 +8,7 @@ import pandas as pd
 from hydra import compose, initialize_config_dir
 
 from bench.harness.app import CONFIG_DIR, run
+from bench.harness.results import MEASURED_COLUMNS
 from bench.harness.store import Store, capture_files, code_version
 
 ROW = {"key": "abc", "object": "01_plate", "distance": 30, "frame": 0, "method": "bp", "valid_px": 12,
@@ -65,10 +66,10 @@ def test_rerun_reads_finished_cells_from_the_store(synth_root, tmp_path):
         third = pd.DataFrame(run(compose(config_name="config", overrides=[*overrides, "freq=d8"]), tmp_path / "c"))
     assert not first.cached.any() and not third.cached.any()
     assert second.set_index("object").cached.to_dict() == {"01_plate": True, "03_sphere": False}
-    pd.testing.assert_frame_equal(first.drop(columns=["cached", "runtime_ms"] + [c for c in first
-                                                                                 if c.startswith("t_")]),
-                                  second.drop(columns=["cached", "runtime_ms"] + [c for c in first
-                                                                                  if c.startswith("t_")]),
+    pd.testing.assert_frame_equal(first.drop(columns=["cached", *MEASURED_COLUMNS] + [c for c in first
+                                                                                      if c.startswith("t_")]),
+                                  second.drop(columns=["cached", *MEASURED_COLUMNS] + [c for c in first
+                                                                                       if c.startswith("t_")]),
                                   check_like=True)
     assert (tmp_path / "b" / "depth" / "01_plate_30_000000.png").read_bytes() == \
         (tmp_path / "a" / "depth" / "01_plate_30_000000.png").read_bytes()
