@@ -48,19 +48,24 @@ setup() {
   fi
   stamp=".venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)"
   if [ ! -f "$stamp" ]; then
-    echo "[setup] installing the package and its dependencies into .venv (first run: about a minute)"
+    echo "[setup] installing the package and its dependencies into .venv (first run: a few minutes, 4 steps)"
+    echo "[setup] 1/4 pip itself"
     .venv/bin/python -m pip install -q --upgrade pip
     # open3d-cpu declares ipywidgets, nbformat and ConfigArgParse (Jupyter widgets, notebook files, a CLI helper:
     # with IPython and jedi ~70 MB) that `import open3d` never loads. Install it without its declared
     # dependencies, then ours plus those of its own that its import does load (dash, plotly, flask: its
     # visualization package imports its plotly viewer), then this package without resolving again. A plain
     # `pip install .` still works and brings them all.
+    echo "[setup] 2/4 open3d-cpu (mesh reading and ray casting)"
     requirements open3d > .venv/requirements-open3d.txt
     .venv/bin/python -m pip install -q --no-deps -r .venv/requirements-open3d.txt
+    echo "[setup] 3/4 numpy, scipy, warp, hydra, pandas, matplotlib and the rest (the longest step)"
     requirements rest > .venv/requirements-rest.txt
     .venv/bin/python -m pip install -q --no-warn-conflicts -r .venv/requirements-rest.txt
+    echo "[setup] 4/4 this package (editable)"
     .venv/bin/python -m pip install -q --no-deps -e .
     rm -f .venv/.installed-*; touch "$stamp"
+    echo "[setup] done"
   fi
 }
 

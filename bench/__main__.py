@@ -10,6 +10,7 @@ import logging
 import sys
 
 from bench import cli
+from bench.harness import stages
 
 PROG = "python -m bench"
 
@@ -34,6 +35,7 @@ def check_command_line(argv: list[str]) -> None:
 
 
 def _main() -> None:
+    stages.start_from_environment()    # python -m bench.perf experiment: seconds per stage, imports included
     logging.raiseExceptions = False    # a log line to a closed stdout is dropped, not a '--- Logging error ---' dump
     check_command_line(sys.argv[1:])
     from bench.harness.app import main

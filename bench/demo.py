@@ -27,13 +27,14 @@ import pandas as pd
 from omegaconf import OmegaConf
 
 from bench import cli
-from bench.harness.app import CONFIG_DIR
-from bench.progress import run_relayed
+from bench.harness import CONFIG_DIR
+from bench.progress import Heartbeat, run_relayed
 from bench.report import agreement, tables
 
 EXPERIMENTS = ("table2", "table3")
-REPORT_FILES = ("{table}.md", "{table}.csv", "{table}.tex", "runtime_vs_error.png")
-# One job at a time: runtimes measured alone (README, "The main job" has the measured cost of this choice).
+REPORT_FILES = ("{table}.md", "{table}.csv", "{table}_pairs.csv", "{table}.tex", "runtime_vs_error.png")
+# One job at a time: runtimes measured alone (docs/measurements/performance.md "The demo's cost"
+# has the measured cost of this choice).
 LAUNCHER = "basic"
 QUIET = ("+hydra.job_logging.handlers.console.level=WARNING",   # per-capture lines stay in each job's app.log
          "hydra.hydra_logging.root.level=WARNING")             # no launcher chatter: the jobs print progress
@@ -52,6 +53,33 @@ def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]
     return objects, list(settings.distances) if distances_cm is None else list(distances_cm)
 
 
+# Seconds on two quiet cores before issue 29's work (docs/measurements/sweep.md, issue 29), for the estimate the
+# demo prints before it starts; the image-formation and generator work make them smaller: update them then.
+GENERATE_S_PER_CAPTURE = 12.6
+SWEEP_S_PER_CAPTURE = {"table2": 1.5, "table3": 57.0}
+BP_MAX_S_PER_CAPTURE = 31.0          # table3's longest cell
+
+
+def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
+    """What the demo will do and about how long it takes on two quiet cores, the long step named; captures on
+    disk and cells in the store are not counted again."""
+    objects, distances = demo_captures(distances_cm)
+    n = len(objects) * len(distances)
+    missing = sum(not (root / o / str(d)).is_dir() for o in objects for d in distances)
+    stored = store.is_dir() and any((store / "cells").glob("*.json"))
+    sweeps_s = {name: n * s for name, s in SWEEP_S_PER_CAPTURE.items()}
+    total_s = missing * GENERATE_S_PER_CAPTURE + sum(sweeps_s.values())
+    steps = [f"generating {missing} of {n} captures ~{missing * GENERATE_S_PER_CAPTURE:.0f} s" if missing
+             else f"the {n} captures are on disk"]
+    steps += [f"{name} ~{seconds:.0f} s" for name, seconds in sweeps_s.items()]
+    text = (f"demo: about {total_s / 60:.0f} min on two quiet cores ({', '.join(steps)}); the long step is "
+            f"table3's BP_max (~{n * BP_MAX_S_PER_CAPTURE:.0f} s, one back-projection over 128 frequencies per "
+            f"capture), then the report's pictures (up to ~3 min when drawn anew)")
+    if stored:
+        text += f"; cells already in {store} are reused, so this run may take much less"
+    return text
+
+
 def generate_dataset(root: Path, synth: str = "realistic", distances_cm: list[int] | None = None) -> None:
     """The synthetic captures configs/dataset/synthetic.yaml asks for (at `distances_cm` when given), generated
     here with the preset `synth` (configs/synth/) before any sweep starts."""
@@ -67,9 +95,12 @@ def generate_dataset(root: Path, synth: str = "realistic", distances_cm: list[in
         print(f"[data {next(done)}/{total}] {result.path.parent.name}/{result.path.name}: {result.status}, "
               f"{result.seconds:.1f} s", flush=True)
 
+    started = time.perf_counter()
     try:
-        generate_catalogue(root, distances, objects, preset(synth), log=log,
-                           on_wait=lambda: print(f"waiting for another process generating into {root}", flush=True))
+        with Heartbeat(lambda: f"generating synthetic captures, {time.perf_counter() - started:.0f} s"):
+            generate_catalogue(root, distances, objects, preset(synth), log=log,
+                               on_wait=lambda: print(f"waiting for another process generating into {root}",
+                                                     flush=True))
     except ForeignRootError:
         print(f"{root} holds data the generator did not write: using it as it is", flush=True)
 
@@ -101,6 +132,7 @@ def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "rea
                f"dataset.captures=[{captures}]", f"dataset.generate.distances=[{','.join(map(str, distances))}]",
                f"hydra.sweep.dir={out / experiment}",
                "report.depth_errors=true",                 # results/<table>/depth_errors is published
+               "timing.repeat=5",                          # runtimes: the median of up to 5 calls (2 s a capture)
                *QUIET]
     print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
     shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells
@@ -163,6 +195,7 @@ def main() -> int:
     args = parser.parse_args()
     root, out, store = args.root.resolve(), cli.output_dir(args.out).resolve(), args.store.resolve()
     started = time.perf_counter()
+    print(plan(root, store, args.distances), flush=True)
     generate_dataset(root, synth=args.synth, distances_cm=args.distances)
     texts = [f"Table I: frequency configurations\n\n{write_table1(out)}"]
     for experiment in EXPERIMENTS:
@@ -176,7 +209,9 @@ def main() -> int:
         print(f"{experiment}: {len(rows)} rows, {int((~rows.cached).sum())} computed, {int(rows.cached.sum())} "
               f"from the store, {time.perf_counter() - sweep_started:.0f} s", flush=True)
     print("\n\n".join(["", *texts]))
-    page = report_page(out)                     # before publishing: it draws the pictures that results/ keeps
+    with Heartbeat(lambda: f"drawing the report's tables and pictures, {time.perf_counter() - report_started:.0f} s"):
+        report_started = time.perf_counter()
+        page = report_page(out)                 # before publishing: it draws the pictures that results/ keeps
     if args.update_results:
         write_table1(args.results)
         for experiment in EXPERIMENTS:

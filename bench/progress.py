@@ -1,5 +1,6 @@
 """Progress bars for long commands (tqdm): drawn on stderr only when it is a terminal, so logs, pipes, CI and
-SLURM job files get the plain progress lines instead.
+SLURM job files get the plain progress lines instead, and a heartbeat line at least every 30 s while a step runs
+(`Heartbeat`: what runs, how far, about how long is left).
 
 `bar` is the bar itself; `steps` and `each` also route `print` and `logging` above the bar while it is drawn
 (tqdm.write), so a command's own result lines stay whole lines and the bar stays at the bottom."""
@@ -16,11 +17,12 @@ import struct
 import subprocess
 import sys
 import termios
-from collections.abc import Iterable, Iterator
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
 from typing import TypeVar
 
 from tqdm import tqdm
-from tqdm.contrib.logging import logging_redirect_tqdm
 
 T = TypeVar("T")
 
@@ -69,6 +71,8 @@ def steps(total: int | None, description: str, unit: str = "step", enabled: bool
         if progress.disable or isinstance(sys.stdout, _LinesAboveBars):   # quiet, or an outer bar redirects already
             yield progress
             return
+        from tqdm.contrib.logging import logging_redirect_tqdm  # only with a bar on a terminal
+
         lines = _LinesAboveBars(sys.stdout, sys.stderr)
         try:
             with contextlib.redirect_stdout(lines), logging_redirect_tqdm():
@@ -77,13 +81,63 @@ def steps(total: int | None, description: str, unit: str = "step", enabled: bool
             lines.finish()
 
 
-def each(items: Iterable[T], description: str, unit: str = "step", enabled: bool = True) -> Iterator[T]:
-    """The items, one bar step each (`steps`); the total is known when `items` has a length."""
+def each(items: Iterable[T], description: str, unit: str = "step", enabled: bool = True,
+         expected_s: float | None = None) -> Iterator[T]:
+    """The items, one bar step each (`steps`); the total is known when `items` has a length. Where no bar is
+    drawn, a `Heartbeat` says how far the loop is at least every HEARTBEAT_S seconds (with `expected_s`, the
+    seconds an item took before, an estimate from the first item on)."""
     total = len(items) if hasattr(items, "__len__") else None
     with steps(total, description, unit, enabled) as progress:
-        for item in items:
-            yield item
-            progress.update()
+        started, done = time.perf_counter(), [0]     # (a disabled tqdm bar does not count)
+
+        def state() -> str:
+            return f"{description}: {how_far(done[0], total, unit, time.perf_counter() - started, expected_s)}"
+
+        with Heartbeat(state) if progress.disable else contextlib.nullcontext():
+            for item in items:
+                yield item
+                done[0] += 1
+                progress.update()
+
+
+HEARTBEAT_S = 30.0
+
+
+def how_far(done: int, total: int | None, unit: str, elapsed_s: float, expected_s: float | None = None) -> str:
+    """`3/8 frames done, 41 s, about 68 s left`: the rate so far, or before the first step the seconds a step took
+    in earlier runs (`expected_s`; none known: no estimate)."""
+    text = f"{done}/{total if total is not None else '?'} {unit}s done, {elapsed_s:.0f} s"
+    if total is None or total <= done:
+        return text
+    if done:
+        return f"{text}, about {elapsed_s / done * (total - done):.0f} s left"
+    if expected_s is not None:
+        return f"{text}, about {max(expected_s * total - elapsed_s, 0.0):.0f} s left (earlier runs)"
+    return text
+
+
+class Heartbeat:
+    """While the `with` block runs: every `every_s` seconds a line `... <describe()>` on stderr (whole lines, so it
+    mixes with logs and other jobs' lines). For steps that are silent off a terminal: a loop without a bar, a long
+    merge, a report's pictures. The line comes from a thread: it appears while the work holds the CPU in NumPy,
+    BLAS or a kernel (they release the interpreter lock)."""
+
+    def __init__(self, describe: Callable[[], str], every_s: float = HEARTBEAT_S):
+        self.describe, self.every_s = describe, every_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._beat, name="heartbeat", daemon=True)
+
+    def _beat(self) -> None:
+        while not self._stop.wait(self.every_s):
+            print(f"... {self.describe()}", file=sys.stderr, flush=True)
+
+    def __enter__(self) -> Heartbeat:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
 
 
 def run_relayed(command: list[str], tail_lines: int = 40, terminal: bool | None = None) -> tuple[int, list[str]]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -24,7 +25,7 @@ from methods.domain.errors import UsageError
 from methods.fsk import DEFAULT_PRIOR_M
 from methods.method import SENSOR_PRIORS, Frame, Method
 from methods.ops.filtering import DEFAULT_THRESHOLD_DB
-from methods.ops.frequencies import config_indices, select_frequencies
+from methods.ops.frequencies import config_targets_ghz, select_frequencies
 from methods.ops.timing import StageTimer
 from methods.prior.image import HostPrior, Prior
 from methods.prior.priors import DEFAULT_FILL, DEFAULT_MAX_JUMP_MM, check_fill, mesh_prior_m, realsense_prior_m
@@ -88,13 +89,17 @@ def prior_image_m(capture: Capture, source: str, grid: RadarGrid, device: str | 
     return backend.mesh_prior(capture.mesh, _transform(capture, "photogrammetry2radar"), grid, keep_on_device, fill)
 
 
-def frequency_indices(freqs_hz: np.ndarray, freq: str | Sequence[float] | None) -> np.ndarray:
-    """Indices of the frame frequencies for a configuration name, a list of target GHz, or None (all)."""
-    if freq is None:
+def frequency_indices(freqs_hz: np.ndarray, freq: str | Sequence[float] | None, where: Path | None = None
+                      ) -> np.ndarray:
+    """Indices of the frame frequencies for a configuration name, a list of target GHz, or None (all). A target
+    this frame cannot serve is a UsageError naming `where` (the frame's file)."""
+    targets_ghz = config_targets_ghz(freq) if isinstance(freq, str) else freq
+    if targets_ghz is None:
         return np.arange(len(freqs_hz))
-    if isinstance(freq, str):
-        return config_indices(freqs_hz, freq)
-    return select_frequencies(freqs_hz, [float(f) for f in freq])
+    try:
+        return select_frequencies(freqs_hz, [float(f) for f in targets_ghz])
+    except UsageError as err:
+        raise UsageError(f"{where}: {err}" if where is not None else str(err)) from None
 
 
 def _check_frequencies_hz(capture: Capture, freqs_hz: np.ndarray) -> None:
@@ -110,6 +115,21 @@ def _check_signal(capture: Capture, signal: np.ndarray) -> None:
     """Refuse a radar frame with NaN or Inf samples (it would turn every depth into a silent NaN)."""
     if not np.all(np.isfinite(signal)):
         raise UsageError(f"the radar frame of capture {capture.name} has NaN or Inf samples")
+
+
+def _no_pixel_reason(capture: Capture, grid: RadarGrid, region: Roi, signal: np.ndarray,
+                     threshold_db: float | None) -> str:
+    """Why a reconstruction kept no pixel, naming its cause: the capture's mask_bb (its metadata.json) leaving no
+    pixel or depth of the grid, a frame without signal (its file), else the depth filter's setting."""
+    if region.n_pixels == 0 or len(region.z_indices(grid.z_m)) == 0:
+        what, axes = ("pixel", "xy") if region.n_pixels == 0 else ("depth sample", "z")
+        bounds = ", ".join(f"{k} {v:g}" for k, v in sorted(capture.metadata.mask_bb_m.items()) if k[0] in axes)
+        return (f"the mask_bb of {capture.path / 'metadata.json'} ({bounds} m) excludes every {what} of the grid "
+                f"(x {grid.bb_min_m[0]:g}..{grid.bb_max_m[0]:g}, y {grid.bb_min_m[1]:g}..{grid.bb_max_m[1]:g}, "
+                f"z {grid.bb_min_m[2]:g}..{grid.bb_max_m[2]:g} m)")
+    if not np.any(signal):
+        return f"the radar frame {capture.radar.path} has no signal (every sample of the used frequencies is zero)"
+    return f"no pixel has a nonzero magnitude within the depth filter (threshold_db={threshold_db})"
 
 
 def capture_roi(capture: Capture, grid: RadarGrid, skips: SkipSettings) -> Roi:
@@ -151,14 +171,14 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     if frame is None:
         raise UsageError(f"capture {capture.name} has no radar frame loaded")
     _check_frequencies_hz(capture, np.asarray(frame.freqs_hz, dtype=np.float64))
-    indices = frequency_indices(frame.freqs_hz, freq)
+    indices = frequency_indices(frame.freqs_hz, freq, frame.path)
     prior_value = parse_prior(prior)
     invalid_reason = None
     method.check(len(indices), freq, prior_value)
     backend = backend_for(device)
     skips = resolve(roi, method.name, len(indices), backend.dense_beats_search)
     grid = grid or frame.grid
-    signal = np.ascontiguousarray(frame.signal[:, :, indices])
+    signal = np.take(frame.signal, indices, axis=2)      # a new C-contiguous array: ~3x faster than fancy indexing
     _check_signal(capture, signal)
     freqs_hz = frame.freqs_hz[indices]
     antennas = capture.antennas
@@ -181,7 +201,7 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     if prior_value in SENSOR_PRIORS and not run_prior.n_covered:
         invalid_reason = f"the {prior_value} prior of capture {capture.name} covers no radar pixel"
     if invalid_reason is None and not result.valid.any():
-        invalid_reason = "no pixel has a nonzero magnitude within the filter threshold (a frame without signal?)"
+        invalid_reason = _no_pixel_reason(capture, grid, region, signal, threshold_db)
     result.extra.update(freq=freq, prior=prior)
     result.device, result.invalid_reason = backend.name, invalid_reason
     return result

@@ -10,11 +10,11 @@ a per-pixel prior image (ny, nx) samples each pixel at prior + k dz, |k dz| <= b
 and pixels without a prior stay NaN.
 
 Region of interest and skips (methods.skips.roi, methods.skips.settings): with an ROI, only its pixels and depths are
-evaluated
-(the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device, through
-the point kernels) and, on the CPU with many frequencies, on range-compressed profiles (methods.skips.bp_search,
-methods.backends.cpu_range). With no ROI and no skip
-(`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
+evaluated (the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device,
+through the point kernels) and, on the CPU with many frequencies, on range-compressed profiles
+(methods.skips.bp_search, methods.backends.cpu_range); with many frequencies on CUDA the coarse ROI's pass and the
+whole search run on the device (`Backend.coarse_peaks`, `Backend.search_depth`: same rules and results). With no ROI
+and no skip (`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
 from __future__ import annotations
 
@@ -104,16 +104,19 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
     depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
     with timer.stage("correlate"):
         if pixels.any() and len(z_m):
-            evaluate = _evaluator(signal, freqs_hz, antennas, backend, use_range,
-                                  _box_corners_m(x_img[pixels], y_img[pixels], z_m))
+            hull_m = _box_corners_m(x_img[pixels], y_img[pixels], z_m)
+            evaluate = _evaluator(signal, freqs_hz, antennas, backend, use_range, hull_m)
             # the plan from the depths before the coarse ROI narrows them: its nearest depth (the sharpest focus)
             # depends on the grid and mask_bb only, so it is computed once per configuration (bp_search cache)
             plan_of = _plan_of(freqs_hz, antennas, z_m, dz_m, skips)
             if skips.coarse_roi and threshold_db is not None and len(z_m) > 1:
                 step_px, radius_px = skips.lattice_px(pixel_pitch_m(grid), skips.roi_lattice_step_m)
+                def coarse_peaks(x_m, y_m, z_c, step):       # on the device where the backend can
+                    return None if use_range else backend.coarse_peaks(signal, freqs_hz, antennas.tx_m,
+                                                                       antennas.rx_m, x_m, y_m, z_c, step, hull_m)
                 found, n_coarse = bp_search.coarse_roi(evaluate, pixels, x_img, y_img, z_m, plan_of, threshold_db,
                                                        step_px, radius_px, skips.roi_keep_margin_db,
-                                                       skips.roi_margin_m)
+                                                       skips.roi_margin_m, coarse_peaks)
                 n_evaluated += n_coarse
                 extra["coarse_roi_voxels"] = n_coarse
                 keep_z = (z_m >= found.z_min_m - 1e-9) & (z_m <= found.z_max_m + 1e-9)
@@ -128,7 +131,12 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                 x_px, y_px = x_img[pixels], y_img[pixels]
                 plan = (plan_of(x_px, y_px) if skips.bp_coarse_to_fine
                         else bp_search.SearchPlan.every_sample(len(x_px)))
-                found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges)
+                on_device = None if use_range else backend.search_depth(
+                    signal, freqs_hz, antennas.tx_m, antennas.rx_m, x_px, y_px, z_m, plan, threshold_db, z_edges,
+                    hull_m)
+                found_depth = None if on_device is None else bp_search.SearchResult(*on_device)
+                if found_depth is None:
+                    found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges)
                 depth_m[pixels], max_proj[pixels] = found_depth.depth_m, found_depth.max_projection
                 n_evaluated += found_depth.n_evaluated
     extra.update(roi_px=int(pixels.sum()), roi_z_m=(float(z_m[0]), float(z_m[-1])) if len(z_m) else None,

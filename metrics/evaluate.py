@@ -13,9 +13,12 @@ computed on another grid is resampled first, metrics.resample):
 * C_s = Chamfer(radar -> GT), C_g = Chamfer(GT -> radar) with KD-trees;
 * P = mean |D_radar - D_gt| over radar points on the silhouette with ground truth; P_e the same on the eroded
   silhouette;
-* off = share (%) of radar points off the silhouette (false positives: the paper's P never sees them), off_err
-  their mean distance to the nearest ground-truth point.
-`faithful=True` reproduces the reference code's C_g, C_s, P and P_e instead (README "The faithful profile"):
+* off = share (%) of the triangulated radar points off the silhouette or outside mask_bb (false positives: the
+  paper's P never sees them), off_err the mean distance of those inside mask_bb to the nearest ground-truth point;
+* coverage = share (%) of the silhouette's pixels that hold a radar point the profile scores: how much of the
+  object the method returned (bench.report.scoring turns it into the success rule's floor).
+`faithful=True` reproduces the reference code's C_g, C_s, P and P_e instead (docs/guide/metrics.md "The faithful
+profile"):
 * ground truth sampled at MAROON's shifted positions K^-1 (u + 0.5, v + 0.5) (up to one pixel off the pixel
   centres at the far edges), triangulated with the reference's quad rule, restricted to mask_bb for C_g / C_s;
 * radar points triangulated with the reference's quad rule (methods.domain.lattice 'maroon': three-valid quads
@@ -52,8 +55,8 @@ from metrics.masks import (
 
 TRIANGULATION_THRESHOLD_M = 0.01
 METRIC_COLUMNS = ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm")
-COUNT_COLUMNS = ("C_g_px", "C_s_px", "P_px", "P_e_px", "off_px", "outside_bb_px")
-SCORE_COLUMNS = (*METRIC_COLUMNS, "off_pct", "off_err_cm", *COUNT_COLUMNS, "failure")
+COUNT_COLUMNS = ("C_g_px", "C_s_px", "P_px", "P_e_px", "off_px", "outside_bb_px", "silhouette_px")
+SCORE_COLUMNS = (*METRIC_COLUMNS, "coverage_pct", "off_pct", "off_err_cm", *COUNT_COLUMNS, "failure")
 
 
 @dataclass
@@ -121,8 +124,10 @@ def pixel_pitch_mm(grid: RadarGrid) -> float:
     return 1000.0 * min(pitches) if pitches else MAROON_RADAR_PITCH_MM
 
 
-def ground_truth(capture: Capture, grid: RadarGrid) -> GroundTruth:
-    """Rasterise the capture's photogrammetry mesh (through `photogrammetry2radar`) onto `grid`."""
+def ground_truth_rasters_m(capture: Capture, grid: RadarGrid) -> tuple[np.ndarray, np.ndarray]:
+    """The capture's photogrammetry mesh (through `photogrammetry2radar`) rasterised onto `grid`: depth (m, NaN =
+    no surface) at the pixel centres and at MAROON's sample positions (the faithful profile's); the costly part of
+    `ground_truth`, which a caller may keep (bench.harness.captures)."""
     if capture.mesh is None:
         raise ValueError(f"{capture.path}: no photogrammetry mesh, metrics need ground truth")
     if "photogrammetry2radar" not in capture.transforms:
@@ -130,16 +135,28 @@ def ground_truth(capture: Capture, grid: RadarGrid) -> GroundTruth:
     vertices_m = apply_transform(capture.transforms["photogrammetry2radar"], capture.mesh.vertices)
     depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid)
     reference_depth_m = rasterise_depth_m(vertices_m, capture.mesh.triangles, grid, xy_m=maroon_sample_xy_m(grid))
-    mask_bb_m = capture.metadata.mask_bb_m
+    return depth_m, reference_depth_m
+
+
+def ground_truth(capture: Capture, grid: RadarGrid) -> GroundTruth:
+    """Rasterise the capture's photogrammetry mesh (through `photogrammetry2radar`) onto `grid`."""
+    return ground_truth_from_rasters(*ground_truth_rasters_m(capture, grid), grid, capture.metadata)
+
+
+def ground_truth_from_rasters(depth_m: np.ndarray, reference_depth_m: np.ndarray, grid: RadarGrid, metadata
+                              ) -> GroundTruth:
+    """The ground truth from `ground_truth_rasters_m`'s two depth maps and the capture's metadata (mask_bb,
+    erosion): points, silhouettes and masks."""
+    mask_bb_m = metadata.mask_bb_m
     points_m = _pixel_points_m(grid, np.nan_to_num(depth_m))
     on_object = np.isfinite(depth_m) & inside_mask_bb(points_m.reshape(-1, 3), mask_bb_m).reshape(depth_m.shape)
     used = triangulated_vertices(depth_m, TRIANGULATION_THRESHOLD_M) & on_object
-    kernel_px = kernel_px_for_pitch(erosion_kernel_mm(capture.metadata.mask_erosion), pixel_pitch_mm(grid))
+    kernel_px = kernel_px_for_pitch(erosion_kernel_mm(metadata.mask_erosion), pixel_pitch_mm(grid))
     silhouette = close_mask(on_object, kernel_px)
-    reference = _reference_ground_truth(reference_depth_m, grid, reference_mask_bb_m(capture.metadata))
+    reference = _reference_ground_truth(reference_depth_m, grid, reference_mask_bb_m(metadata))
     return GroundTruth(grid=grid, depth_m=depth_m, points=PointSet(points_m[used]), silhouette=silhouette,
                        eroded_silhouette=erode_mask(silhouette, kernel_px), mask_bb_m=mask_bb_m,
-                       mask_erosion=capture.metadata.mask_erosion,
+                       mask_erosion=metadata.mask_erosion,
                        reference=reference)
 
 
@@ -206,6 +223,9 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
         on, on_eroded = selected & gt.silhouette & has_gt, selected & gt.eroded_silhouette & has_gt
         p_px, p_e_px = int(on.sum()), int(on_eroded.sum())
         p_cm, p_e_cm = _mean_abs_cm(depth_m, gt.depth_m, on), _mean_abs_cm(depth_m, gt.depth_m, on_eroded)
+    outside = used & ~selected
+    counted = selected.sum() + outside.sum()
+    silhouette_px = int(gt.silhouette.sum())
     off_points_m = points_m[off]
     off_err_cm = (float(np.mean(nearest_distances_m(off_points_m, gt.points))) * 100.0
                   if len(off_points_m) and len(gt.points.points_m) else float("nan"))
@@ -213,10 +233,11 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
         "C_g_cm": one_sided_chamfer_m(gt_points.points_m, PointSet(radar_points_m)) * 100.0,
         "C_s_cm": one_sided_chamfer_m(radar_points_m, gt_points) * 100.0,
         "P_cm": p_cm, "P_e_cm": p_e_cm,
-        "off_pct": 100.0 * off.sum() / selected.sum() if selected.any() else float("nan"),
+        "coverage_pct": 100.0 * (selected & gt.silhouette).sum() / silhouette_px if silhouette_px else float("nan"),
+        "off_pct": 100.0 * (off.sum() + outside.sum()) / counted if counted else float("nan"),
         "off_err_cm": off_err_cm,
         "C_g_px": len(gt_points.points_m), "C_s_px": len(radar_points_m), "P_px": p_px, "P_e_px": p_e_px,
-        "off_px": int(off.sum()), "outside_bb_px": int((used & ~selected).sum()),
+        "off_px": int(off.sum()), "outside_bb_px": int(outside.sum()), "silhouette_px": silhouette_px,
     }
     scores["failure"] = _failure(depth_m, used, selected, scores)
     return scores
@@ -224,6 +245,6 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
 
 def no_ground_truth_scores(reason: str) -> dict[str, float | int | str]:
     """SCORE_COLUMNS of a capture that cannot be evaluated (e.g. no mesh): NaN metrics, zero counts, `reason`."""
-    scores = {name: float("nan") for name in (*METRIC_COLUMNS, "off_pct", "off_err_cm")}
+    scores = {name: float("nan") for name in (*METRIC_COLUMNS, "coverage_pct", "off_pct", "off_err_cm")}
     scores.update(dict.fromkeys(COUNT_COLUMNS, 0), failure=reason)
     return scores

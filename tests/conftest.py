@@ -5,12 +5,32 @@
 * `results_root`: the same captures with the preset of the committed results (`realistic`; ~30 s, regression only).
 * `synth_capture(object_name, distance_cm, **config_overrides) -> Path`: one custom capture, cached per
   configuration for the whole session (e.g. `frequency_points=16` for a fast capture, `depth_noise=False`).
+
+Every test runs with SLURM's commands off PATH (tests/support/no_slurm.py), also where SLURM is installed, so a
+test that touches one without faking it fails everywhere, not only on machines without SLURM; the opt-in
+real-cluster test (BENCH_SLURM_TRY=1, tests/bench/harness/test_slurm.py) keeps them.
 """
 from __future__ import annotations
 
 import dataclasses
+import os
+import shutil
+import tempfile
+from pathlib import Path
 
 import pytest
+from no_slurm import path_without_slurm
+
+_SHADOW_PATH = Path(tempfile.mkdtemp(prefix="bench-no-slurm-"))
+
+
+def pytest_configure(config):
+    if os.environ.get("BENCH_SLURM_TRY") != "1":
+        os.environ["PATH"] = path_without_slurm(os.environ.get("PATH", ""), _SHADOW_PATH)
+
+
+def pytest_unconfigure(config):
+    shutil.rmtree(_SHADOW_PATH, ignore_errors=True)
 
 SYNTH_FIXTURE_CAPTURES = (("01_plate", 30), ("03_sphere", 30))
 

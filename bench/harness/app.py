@@ -8,14 +8,13 @@ the result store first (bench.harness.store) and only missing cells are computed
 """
 from __future__ import annotations
 
-import collections
-import dataclasses
 import functools
 import hashlib
 import inspect
 import logging
 import os
 import socket
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -27,22 +26,23 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
+from bench.harness import CONFIG_DIR, captures, stages, validate
+from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
-from bench.harness.results import ResultsCsv, write_depth
-from bench.harness.sizing import sweep_jobs, timing_mode
+from bench.harness.identity import params_string
+from bench.harness.results import BackgroundWriter, ResultsCsv, write_depth
+from bench.harness.sizing import contended, machine_load, sweep_jobs, timing_mode
 from bench.harness.store import Store, capture_files, code_version, write_arrays
 from bench.maroon import reader
-from bench.maroon.antennas import load_antenna_array
 from bench.maroon.frames import parse_frame_spec, select_frames
 from bench.progress import each
 from methods.domain.capture import Capture, RadarGrid
 from methods.domain.errors import DatasetError
 from methods.ops.frequencies import config_targets_ghz
-from metrics.evaluate import GroundTruth, evaluate, ground_truth, no_ground_truth_scores
+from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
 
 log = logging.getLogger("bench")
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 
 
 def _freq_ghz(name: str) -> list[float] | None:
@@ -90,55 +90,42 @@ def ensure_synthetic(dataset: DictConfig, root: Path, synth: DictConfig) -> None
     except (TypeError, ValueError) as err:
         raise cli.UserError("synth", str(err)) from None
     objects = None if dataset.generate.objects is None else list(dataset.generate.objects)
+    cached = []
+
+    def report(result) -> None:       # a generated capture gets its line; those found ready one line in all
+        if result.status == "cached":
+            cached.append(result)
+        else:
+            log.info("synthetic %s: %s (%.1f s)", result.path, result.status, result.seconds)
+
     try:
         generate_catalogue(root, distances=list(dataset.generate.distances), objects=objects, config=config,
-                           log=lambda r: log.info("synthetic %s: %s (%.1f s)", r.path, r.status, r.seconds),
+                           log=report,
                            on_wait=lambda: log.info("waiting for another process generating captures in %s", root))
     except ForeignRootError:
         log.info("%s holds data the generator did not write: reading it as it is, generating nothing", root)
+    if cached:
+        log.info("synthetic %s: %d captures up to date (%.1f s)", root, len(cached), sum(r.seconds for r in cached))
 
 
 def _parts(prior: str) -> tuple[str, ...]:
+    """The capture parts a cell's result depends on (its store key covers their files): the radar frame, the mesh
+    (ground truth) and the prior's sensor."""
     parts = ["radar", "mesh"]
     if prior == "realsense":
         parts.append("realsense")
     return tuple(parts)
 
 
+def _method_parts(prior: str) -> tuple[str, ...]:
+    """The parts the method reads: the radar frame and its prior's (the mesh is the photogrammetry prior); the
+    ground truth's mesh is read only when the ground truth is not kept (bench.harness.captures)."""
+    return ("radar", *{"realsense": ("realsense",), "photogrammetry": ("mesh",)}.get(prior, ()))
+
+
 def _antenna_files(cfg: DictConfig) -> tuple[str | None, str | None]:
     files = cfg.dataset.antennas
     return tuple(None if f is None else to_absolute_path(str(f)) for f in (files.tx_file, files.rx_file))
-
-
-_CAPTURES: collections.OrderedDict = collections.OrderedDict()   # (frame key) -> (Capture, parts read)
-CAPTURES_KEPT = 16
-
-
-def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
-                  antenna_files: tuple[str | None, str | None]) -> Capture:
-    """The capture frame with `parts`, each part read once per process: a worker (or the basic launcher's one
-    process) runs many cells on the same captures, BP needing radar and mesh and MM-2FSK the RealSense frame too,
-    so a later cell reads only the parts no earlier cell read (the RealSense frame paired with the cached radar
-    frame's time, as read_capture pairs it)."""
-    key = (capture_dir, frame, empty_filtered, antenna_files)
-    cached, have = _CAPTURES.pop(key, (None, ()))
-    missing = tuple(part for part in parts if part not in have)
-    if missing:
-        paired = None
-        if "realsense" in missing and cached is not None and cached.radar is not None \
-                and (capture_dir / "realsense").is_dir():
-            paired = reader.realsense_pairing(capture_dir / "realsense", cached.radar.timestamp_s).realsense_frame
-        new = reader.read_capture(capture_dir, frame=frame, parts=missing, empty_filtered=empty_filtered,
-                                  antennas=load_antenna_array(*antenna_files), realsense_frame=paired)
-        if cached is not None:
-            new = dataclasses.replace(cached, notes=cached.notes + new.notes,
-                                      transforms=new.transforms if "mesh" in missing else cached.transforms,
-                                      **{part: getattr(new, part) for part in missing})
-        cached, have = new, have + missing
-    _CAPTURES[key] = (cached, have)
-    while len(_CAPTURES) > CAPTURES_KEPT:
-        _CAPTURES.popitem(last=False)
-    return dataclasses.replace(cached, **{part: None for part in reader.PARTS if part not in parts})
 
 
 def _frames(capture_dir: Path, spec) -> list[int]:
@@ -157,7 +144,8 @@ def _pairing_columns(capture: Capture, capture_dir: Path) -> dict:
 
 
 def _container(node):
-    return None if node is None else OmegaConf.to_container(node)
+    """A config node as plain Python (a resolver's value, e.g. freq.f_ghz, is plain already)."""
+    return OmegaConf.to_container(node) if OmegaConf.is_config(node) else node
 
 
 def _roi(cfg: DictConfig) -> str | dict:
@@ -183,6 +171,16 @@ def _method(cfg: DictConfig):
         return make_method(target, {**_profile_params(cfg, target), **OmegaConf.to_container(cfg.method.params)})
     except MethodError as err:
         raise cli.UserError(f"method._target_={target}", str(err)) from None
+
+
+def _check_method(cfg: DictConfig, method) -> None:
+    """Refuse a frequency configuration or prior the method does not accept before any data is generated or read,
+    naming the configurations (`freq='d10'`, not its frequencies); a configuration of all frequencies (`full`) is
+    counted when the frame is read."""
+    from methods.api import parse_prior
+
+    n_freqs = len(cfg.freq.f_ghz) if cfg.freq.f_ghz is not None else (method.n_freqs or 0)
+    method.check(n_freqs, cfg.freq.name, parse_prior(cfg.prior.name))
 
 
 def _profile_params(cfg: DictConfig, target: str) -> dict:
@@ -234,23 +232,30 @@ def _cell(cfg: DictConfig, device: str, method) -> dict:
             "device": device, "code": code_version()}
 
 
-_GROUND_TRUTHS: collections.OrderedDict = collections.OrderedDict()
-GROUND_TRUTHS_KEPT = 16
+def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, device: str):
+    """`methods.reconstruct` as configured, timed: (Reconstruction, timing columns). The machine's load
+    (`load_1m`, before the call) and the process's CPU time and wall time of the call (`cpu_ms`, `call_ms`) go
+    beside the method's own warm runtime. With `timing.repeat` N > 1 the call is repeated while the repeats fit in
+    `timing.budget_s` (at most N calls) and `runtime_ms` is the median of their runtimes (`runtime_runs` calls):
+    one busy moment of the machine then does not make the figure."""
+    import methods
 
-
-def _ground_truth(capture_dir: Path, capture: Capture) -> GroundTruth:
-    """The capture's ground truth on its metric grid (the frame's calibration grid), whatever the cell's prior.
-
-    One ray cast, silhouette and KD-tree per capture, grid and object pose for every cell and frame of a process
-    (the basic launcher runs a sweep's jobs in one process): a static object's frames share it."""
-    pose = capture.transforms.get("photogrammetry2radar")
-    key = (capture_dir, capture.radar.grid, None if pose is None else pose.tobytes())
-    if key not in _GROUND_TRUTHS:
-        _GROUND_TRUTHS[key] = ground_truth(capture, capture.radar.grid)
-        while len(_GROUND_TRUTHS) > GROUND_TRUTHS_KEPT:
-            _GROUND_TRUTHS.popitem(last=False)
-    _GROUND_TRUTHS.move_to_end(key)
-    return _GROUND_TRUTHS[key]
+    targets_ghz = None if cfg.freq.f_ghz is None else [float(f) for f in cfg.freq.f_ghz]
+    call = functools.partial(methods.reconstruct, capture, method=method, freq=targets_ghz, prior=cfg.prior.name,
+                             scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
+                             threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
+    load_1m = machine_load()
+    cpu_s, wall_s = time.process_time(), time.perf_counter()
+    with stages.stage("methods"):
+        rec = call()
+    columns = {"load_1m": load_1m, "cpu_ms": 1e3 * (time.process_time() - cpu_s),
+               "call_ms": 1e3 * (time.perf_counter() - wall_s)}
+    runtimes_ms = [rec.timings_ms["total"]]
+    budget_ms = 1e3 * float(cfg.timing.budget_s)
+    while len(runtimes_ms) < int(cfg.timing.repeat) and sum(runtimes_ms) + runtimes_ms[0] <= budget_ms:
+        with stages.stage("methods"):
+            runtimes_ms.append(call().timings_ms["total"])
+    return rec, {"runtime_ms": statistics.median(runtimes_ms), "runtime_runs": len(runtimes_ms), **columns}
 
 
 def _compute(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, device: str, gt: GroundTruth | None
@@ -258,27 +263,23 @@ def _compute(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, device:
     """Reconstruct on `grid`, then evaluate on the capture's metric grid (the ground truth's; the depth map is
     resampled there when the method computed on another grid): (row without identification columns, arrays on
     the metric grid)."""
-    import methods
-
-    targets_ghz = None if cfg.freq.f_ghz is None else [float(f) for f in cfg.freq.f_ghz]
-    rec = methods.reconstruct(capture, method=method, freq=targets_ghz, prior=cfg.prior.name,
-                              scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
-                              threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
+    rec, timing_columns = _reconstruct(cfg, method, capture, grid, device)
     metric_grid = capture.radar.grid
-    depth_m = resample_depth_m(rec.depth_m, rec.grid, metric_grid)
-    if gt is not None:
-        scores, gt_depth_m = evaluate(depth_m, gt, faithful=bool(cfg.metrics.faithful)), gt.depth_m
-    else:
-        scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
-        log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
+    with stages.stage("metrics"):
+        depth_m = resample_depth_m(rec.depth_m, rec.grid, metric_grid)
+        if gt is not None:
+            scores, gt_depth_m = evaluate(depth_m, gt, faithful=bool(cfg.metrics.faithful)), gt.depth_m
+        else:
+            scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
+            log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
+        magnitude = resample_nearest(rec.magnitude, rec.grid, metric_grid)
     if rec.invalid_reason:       # the method's own account of an all-invalid result, not just 'no valid'
         scores["failure"] = rec.invalid_reason
     row = {"f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
-           "runtime_ms": rec.timings_ms["total"], "device": rec.device,
+           **timing_columns, "device": rec.device,
            "compute_grid_size": "x".join(map(str, rec.grid.size)), "roi_px": rec.extra.get("roi_px"), **scores}
     row.update({f"t_{stage}_ms": ms for stage, ms in rec.timings_ms.items() if stage != "total"})
-    arrays = {"depth_m": depth_m, "magnitude": resample_nearest(rec.magnitude, rec.grid, metric_grid),
-              "gt_depth_m": gt_depth_m}
+    arrays = {"depth_m": depth_m, "magnitude": magnitude, "gt_depth_m": gt_depth_m}
     return row, arrays
 
 
@@ -293,58 +294,27 @@ def _grid_attrs(grid: RadarGrid) -> dict:
     return {"bb_min_m": list(grid.bb_min_m), "bb_max_m": list(grid.bb_max_m), "grid_size": list(grid.size)}
 
 
-def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str = "alone") -> list[dict]:
-    """Evaluate every capture of the configured dataset; returns the result rows (also written to disk).
+def _identity(cfg: DictConfig, method, params: str) -> dict:
+    """The columns that say which configuration a row is of (with the capture frame's, its identity:
+    bench.harness.identity): set on every row, a stored one too (its key holds the values, not the names)."""
+    return {"method": method.name, "label": method.label, "freq": cfg.freq.name, "prior": cfg.prior.name,
+            "grid": cfg.grid.name, "params": params, "metrics": "faithful" if cfg.metrics.faithful else "sound"}
 
-    `generate`: first generate missing synthetic captures (the dataset config's `generate` settings; the command
-    line sets it only where the user asked for synthetic data, see `synthetic_asked`). `timing` ('alone' or
-    'parallel', see `timing_mode`) goes into every computed row; with 'alone' a stored row whose runtime was not
-    measured alone is recomputed, so a contended runtime never passes for a clean one.
-    """
-    from methods.backends import resolve_device
 
-    root = Path(to_absolute_path(str(cfg.dataset.root)))
-    if generate:
-        ensure_synthetic(cfg.dataset, root, cfg.synth)
-    if not root.exists():
-        raise DatasetError(root, "dataset root does not exist")
-    store = None if cfg.store.dir is None else _store(to_absolute_path(str(cfg.store.dir)))
-    device = resolve_device(cfg.device)
-    method = _method(cfg)
-    cell = _cell(cfg, device, method)
-    grid_override = _container(cfg.grid.override)
-    spec = parse_frame_spec(OmegaConf.to_container(cfg.dataset.frame) if OmegaConf.is_list(cfg.dataset.frame)
-                            else cfg.dataset.frame)
-    empty_filtered, parts = bool(cfg.dataset.empty_filtered), _parts(cfg.prior.name)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    rows, results_csv = [], ResultsCsv(out_dir / "results.csv")
-    todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
-    # a bar per job only when it runs alone: jobs side by side on one terminal would draw over each other
-    for capture_dir, frame in each(todo, f"{method.label} {cfg.freq.name}", unit="frame", enabled=timing == "alone"):
-        key = hit = None
-        if store is not None:
-            files = capture_files(capture_dir, frame, parts, empty_filtered) + [Path(f) for f in _antenna_files(cfg)
-                                                                                if f is not None]
-            key = store.key({**cell, "frame": frame, "capture": store.capture_digest(files)})
-            hit = store.get(key, names=("depth_m",))     # the depth PNG's; arrays.h5 gets copies (below)
-            if hit is not None and timing == "alone" and hit[0].get("timing") != "alone":
-                hit = None           # its runtime was measured beside other jobs (or not recorded): re-measure
-        if hit is None:
-            capture = _read_capture(capture_dir, frame, parts, empty_filtered, _antenna_files(cfg))
-            gt = None if capture.mesh is None else _ground_truth(capture_dir, capture)
-            grid = capture.radar.grid
-            row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index,
-                   "method": method.name, "label": method.label, "freq": cfg.freq.name, "prior": cfg.prior.name,
-                   "grid": cfg.grid.name,
-                   "metrics": "faithful" if cfg.metrics.faithful else "sound",
-                   "radar_time_s": capture.radar.timestamp_s, **_pairing_columns(capture, capture_dir)}
-            scores, arrays = _compute(cfg, method, capture, grid_for(capture, grid_override), device, gt)
-            row.update(scores, timing=timing, hostname=socket.gethostname(), code_version=cell["code"], key=key)
-            if store is not None:
-                store.put(key, row, arrays, _grid_attrs(grid))
-        else:
-            row, arrays, attrs = hit
-            grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]), tuple(map(int, attrs["grid_size"])))
+def _reusable(stored_timing: str | None, timing: str) -> bool:
+    """Whether a stored row's runtime serves a run asking for `timing`: any serves 'parallel'; 'alone' takes a
+    row timed alone, or one timed under contention while the machine is still busy (re-measuring could not do
+    better), never one timed beside other jobs of its sweep."""
+    if timing != "alone" or stored_timing == "alone":
+        return True
+    return stored_timing == "contended" and contended(machine_load())
+
+
+def _write_outputs(out_dir: Path, row: dict, arrays: dict, grid: RadarGrid, store: Store | None, key: str | None,
+                   results_csv: ResultsCsv) -> None:
+    """One capture's files: depth PNG + JSON + preview, its arrays in arrays.h5 (copied from the store's cell when
+    there is one), its results.csv line."""
+    with stages.stage("outputs"):
         stem = f"{row['object']}_{row['distance']}_{row['frame']:06d}"
         write_depth(out_dir, stem, arrays["depth_m"], grid)
         array_attrs = {**_grid_attrs(grid), "key": key or ""}
@@ -352,11 +322,109 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
             store.copy_arrays(key, out_dir / "arrays.h5", stem, array_attrs)
         else:
             write_arrays(out_dir / "arrays.h5", stem, arrays, array_attrs)
-        rows.append({**row, "cached": hit is not None})
-        results_csv.add(rows[-1])     # appended after every capture: an interruption loses no row
-        log.info("%s/%s: %s, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],
-                 "cached" if hit else "computed", row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
+        results_csv.add(row)       # appended after every capture: an interruption loses no row
+
+
+def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str = "alone", params: str = ""
+        ) -> list[dict]:
+    """Evaluate every capture of the configured dataset; returns the result rows (also written to disk).
+
+    The method, its parameters and the prior are checked before any data is generated or read. `generate`: first
+    generate missing synthetic captures (the dataset config's `generate` settings; the command line sets it only
+    where the user asked for synthetic data, see `synthetic_asked`). `timing` ('alone' or 'parallel', see
+    `timing_mode`) goes into every computed row ('contended' instead of 'alone' when the machine was busy,
+    bench.harness.sizing.contended); with 'alone' a stored row timed beside other jobs is recomputed, so a
+    contended runtime never passes for a clean one. `params`: the row's parameters (bench.harness.identity).
+    Output files are written on a background thread while the next capture computes.
+    """
+    from methods.backends import resolve_device
+
+    device = resolve_device(cfg.device)
+    method = _method(cfg)
+    _check_method(cfg, method)
+    cell = _cell(cfg, device, method)
+    root = Path(to_absolute_path(str(cfg.dataset.root)))
+    if generate:
+        ensure_synthetic(cfg.dataset, root, cfg.synth)
+    if not root.exists():
+        raise DatasetError(root, "dataset root does not exist")
+    store = None if cfg.store.dir is None else _store(to_absolute_path(str(cfg.store.dir)))
+    grid_override = _container(cfg.grid.override)
+    spec = parse_frame_spec(OmegaConf.to_container(cfg.dataset.frame) if OmegaConf.is_list(cfg.dataset.frame)
+                            else cfg.dataset.frame)
+    empty_filtered, parts = bool(cfg.dataset.empty_filtered), _parts(cfg.prior.name)
+    antenna_files = _antenna_files(cfg)
+    identity = _identity(cfg, method, params)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rows, results_csv, writer = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter()
+    with stages.stage("reading"):
+        todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
+    label = f"{method.label} {cfg.freq.name}{f' {params}' if params else ''}"
+    durations = None if store is None else Durations(store.root)
+    configuration = configuration_id(cell)
+    expected_s = None if durations is None else durations.seconds(configuration)
+    computed_s = []
+    try:
+        # a bar per job only when it runs alone: jobs side by side on one terminal would draw over each other
+        for capture_dir, frame in each(todo, label, unit="frame", enabled=timing == "alone", expected_s=expected_s):
+            started = time.perf_counter()
+            key = hit = None
+            if store is not None:
+                with stages.stage("reading"):
+                    files = capture_files(capture_dir, frame, parts, empty_filtered) + [
+                        Path(f) for f in antenna_files if f is not None]
+                    key = store.key({**cell, "frame": frame, "capture": store.capture_digest(files)})
+                    hit = store.get(key, names=("depth_m",))     # the depth PNG's; arrays.h5 gets copies (below)
+                if hit is not None and not _reusable(hit[0].get("timing"), timing):
+                    hit = None           # its runtime was measured beside other jobs (or not recorded): re-measure
+            if hit is None:
+                row, arrays, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
+                                                  store, grid_override, device, timing, identity)
+                row.update(hostname=socket.gethostname(), code_version=cell["code"], key=key)
+                if store is not None:
+                    writer.submit(store.put, key, row, arrays, _grid_attrs(grid))
+            else:
+                row, arrays, attrs = hit
+                row.update(identity)
+                grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]),
+                                 tuple(map(int, attrs["grid_size"])))
+            rows.append({**row, "cached": hit is not None})
+            writer.submit(_write_outputs, out_dir, rows[-1], arrays, grid, store, key, results_csv)
+            if hit is None:
+                computed_s.append(time.perf_counter() - started)
+                log.info("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"],
+                         row["distance"], row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
+    finally:
+        with stages.stage("outputs"):
+            writer.close()
+    if durations is not None and computed_s:
+        durations.record(configuration, statistics.fmean(computed_s))
+    cached = sum(row["cached"] for row in rows)
+    if cached:
+        log.info("%d of %d capture frames from the store (%s)", cached, len(rows), store.root)
     return rows
+
+
+def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_filtered: bool, antenna_files,
+                  store: Store | None, grid_override, device: str, timing: str, identity: dict
+                  ) -> tuple[dict, dict, RadarGrid]:
+    """Read, reconstruct and score one capture frame: (row, arrays, metric grid)."""
+    def read(parts):
+        with stages.stage("reading"):
+            return captures.read(capture_dir, frame, parts, empty_filtered, antenna_files, store)
+
+    capture = read(_method_parts(cfg.prior.name))
+    with stages.stage("ground truth"):
+        key = None if store is None else captures.kept_key(store, capture_dir, frame, empty_filtered,
+                                                           capture.radar.grid)
+        gt = captures.ground_truth(capture_dir, capture, lambda: read((*_method_parts(cfg.prior.name), "mesh")),
+                                   store, key)
+    grid = capture.radar.grid
+    row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index, **identity,
+           "radar_time_s": capture.radar.timestamp_s, **_pairing_columns(capture, capture_dir)}
+    scores, arrays = _compute(cfg, method, capture, grid_for(capture, grid_override), device, gt)
+    row.update(scores, timing="contended" if timing == "alone" and contended(scores["load_1m"]) else timing)
+    return row, arrays, grid
 
 
 def _isolate_warp_cache() -> None:
@@ -365,10 +433,13 @@ def _isolate_warp_cache() -> None:
         os.environ["WARP_CACHE_PATH"] = str(Path(tempfile.gettempdir()) / f"bench-warp-{os.getuid()}-{os.getpid()}")
 
 
-def progress_line(cfg: DictConfig, hydra_cfg: DictConfig, rows: list[dict], seconds: float) -> str:
+def progress_line(cfg: DictConfig, hydra_cfg: DictConfig, rows: list[dict], seconds: float, params: str = ""
+                  ) -> str:
     """What a finished job prints: `[table3 5/13] bp_d05: 8 captures, 3 computed, 5 cached, 12.3 s` in a multirun
-    (job number of the sweep's jobs), `mm2fsk_d10_realsense: 2 captures, ... -> <run dir>` for a single run."""
+    (job number of the sweep's jobs), `mm2fsk_d10_realsense: 2 captures, ... -> <run dir>` for a single run; the
+    job's parameters follow its cell (`custom_d10_realsense offset_mm=2: ...`)."""
     cell = hydra_cfg.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
+    cell += f" {params}" if params else ""
     cached = sum(bool(row["cached"]) for row in rows)
     n_captures = len({(row["object"], row["distance"]) for row in rows})
     captures = f"{n_captures} capture{'s' if n_captures != 1 else ''}"
@@ -388,12 +459,14 @@ def main(cfg: DictConfig) -> None:
     _isolate_warp_cache()
     try:
         cli.resolve_device(str(cfg.device), option="device=")   # before generating or reading anything
+        validate.check(cfg)                                       # every setting in its range (one line if not)
         if cfg.store.dir is not None:
             cli.check_creatable_dir(to_absolute_path(str(cfg.store.dir)), f"store.dir={cfg.store.dir}")
         started = time.perf_counter()
+        params = params_string(list(hydra_cfg.overrides.task))
         rows = run(cfg, out_dir, generate=synthetic_asked(list(hydra_cfg.overrides.task)),
-                   timing=timing_mode(hydra_cfg))
-        print(progress_line(cfg, hydra_cfg, rows, time.perf_counter() - started), flush=True)
+                   timing=timing_mode(hydra_cfg), params=params)
+        print(progress_line(cfg, hydra_cfg, rows, time.perf_counter() - started, params), flush=True)
     except BrokenPipeError:    # stdout closed (`... | head`): quiet exit 141, not Hydra's traceback
         cli.exit_on_closed_stdout()
     except MissingMandatoryValue as err:

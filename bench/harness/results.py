@@ -2,16 +2,20 @@
 from __future__ import annotations
 
 import functools
+import io
 import json
-import os
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from bench.harness import atomic
 from bench.maroon.images import PNG_COMPRESS_LEVEL, write_uint16_png
 from methods.domain.capture import RadarGrid
 
+#: what a run measures rather than computes (two runs of one cell differ in them): runtimes and their conditions
+MEASURED_COLUMNS = ["runtime_ms", "runtime_runs", "cpu_ms", "call_ms", "load_1m", "timing"]
 RESULT_COLUMNS = ["object", "distance", "frame", "method", "freq", "prior", "f_GHz", "C_g_cm", "C_s_cm", "P_cm",
                   "P_e_cm", "valid_px", "runtime_ms", "device", "timing"]
 
@@ -59,7 +63,9 @@ def write_depth_preview(path: Path, depth_m: np.ndarray) -> tuple[float, float]:
     low_m, high_m = (float(np.percentile(valid, 1)), float(np.percentile(valid, 99))) if valid.size else (0.0, 1.0)
     scaled = np.clip((depth_m - low_m) / max(high_m - low_m, 1e-6), 0.0, 1.0)
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(preview_rgb(scaled)).save(path, compress_level=PNG_COMPRESS_LEVEL)
+    image = io.BytesIO()
+    Image.fromarray(preview_rgb(scaled)).save(image, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
+    atomic.write_bytes(path, image.getvalue())
     return low_m, high_m
 
 
@@ -69,13 +75,15 @@ def write_depth(out_dir: Path, stem: str, depth_m: np.ndarray, grid: RadarGrid) 
     depth_dir = out_dir / "depth"
     depth_dir.mkdir(parents=True, exist_ok=True)
     png = depth_dir / f"{stem}.png"
-    write_uint16_png(png, depth_to_png_mm(depth_m))
+    image = io.BytesIO()
+    write_uint16_png(image, depth_to_png_mm(depth_m))
+    atomic.write_bytes(png, image.getvalue())
     low_m, high_m = write_depth_preview(out_dir / "depth_preview" / f"{stem}.png", depth_m)
     info = {"bb_min": list(grid.bb_min_m), "bb_max": list(grid.bb_max_m), "grid_size": list(grid.size),
             "units": "uint16 millimetres, 0 = invalid, row 0 = +y, column 0 = xmin",
             "preview": {"file": f"../depth_preview/{stem}.png", "colormap": "viridis", "vmin_m": low_m,
                         "vmax_m": high_m, "no_depth": "grey"}}
-    (depth_dir / f"{stem}.json").write_text(json.dumps(info, indent=2))
+    atomic.write_bytes(depth_dir / f"{stem}.json", json.dumps(info, indent=2).encode())
     return png
 
 
@@ -86,9 +94,7 @@ def write_results(path: Path, rows: list[dict]) -> pd.DataFrame:
         if column not in table:
             table[column] = np.nan
     table = table[RESULT_COLUMNS + [c for c in table.columns if c not in RESULT_COLUMNS]]
-    tmp = path.with_suffix(".csv.tmp")
-    table.to_csv(tmp, index=False)
-    os.replace(tmp, path)
+    atomic.write_bytes(path, table.to_csv(index=False).encode())
     return table
 
 
@@ -97,9 +103,11 @@ class ResultsCsv:
     costs O(N) (rewriting the whole table after every frame cost O(N^2)) and an interruption loses no finished row.
 
     The file is (re)written whole, atomically (`write_results`), only for the first row and when a row brings a
-    column the header lacks (columns in `write_results`' order); every other row is one `write` of one line in the
-    header's column order (missing values empty), which a killed process either made or did not: the file always
-    parses. Values are formatted by pandas as in `write_results` (an integer column holding empty cells is written
+    column the header lacks (columns in `write_results`' order); every other row is one appended line in the
+    header's column order (missing values empty), which a killed process either made or did not, and which a failed
+    write (full disk, file-size limit) cuts off again (bench.harness.atomic.append_bytes): the file always parses,
+    and a line cut by a crash between two write calls is refused by the merge (bench.report.merge).
+    Values are formatted by pandas as in `write_results` (an integer column holding empty cells is written
     '12' here, '12.0' there: the same number read back).
     """
 
@@ -113,9 +121,26 @@ class ResultsCsv:
         if self.columns is None or not row.keys() <= set(self.columns):
             self.columns = list(write_results(self.path, self.rows).columns)
             return
-        line = pd.DataFrame([row], columns=self.columns).to_csv(header=False, index=False).encode()
-        descriptor = os.open(self.path, os.O_WRONLY | os.O_APPEND)
+        atomic.append_bytes(self.path, pd.DataFrame([row], columns=self.columns).to_csv(header=False, index=False)
+                            .encode())
+
+
+class BackgroundWriter:
+    """Output files written on one background thread, in the order given, while the caller computes the next
+    capture (PNG compression, HDF5 and file writes release the interpreter lock). `close` waits for them; the first
+    error a write raised is raised by the next `submit` or by `close`, so a failed write still fails the run."""
+
+    def __init__(self):
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="outputs")
+        self._pending: list[Future] = []
+
+    def submit(self, function, *args) -> None:
+        self._pending = [future for future in self._pending if not (future.done() and future.result() is None)]
+        self._pending.append(self._pool.submit(function, *args))
+
+    def close(self) -> None:
         try:
-            os.write(descriptor, line)
+            for future in self._pending:
+                future.result()
         finally:
-            os.close(descriptor)
+            self._pool.shutdown(wait=True)

@@ -6,7 +6,9 @@
 * `timing_mode` says how a job's runtimes were measured: 'alone' (no other job of the sweep ran at the same time:
   a single run, the basic launcher, joblib with one worker, a one-job sweep) or 'parallel' (jobs shared the
   machine: joblib with more than one worker, submitit_local, SLURM arrays with array_parallelism > 1, any other
-  launcher). Results rows carry it in the column `timing`.
+  launcher). Results rows carry it in the column `timing`, with 'contended' for a row the app timed alone while
+  the machine was busy with other work (`contended`: its 1-minute load average, column `load_1m`, above its
+  number of cores).
 """
 from __future__ import annotations
 
@@ -48,6 +50,20 @@ def sweep_jobs() -> int | None:
     """The current multirun's number of jobs (None when unknown)."""
     value = os.environ.get(JOBS_ENV, "")
     return int(value) if value.isdigit() else None
+
+
+def machine_load() -> float:
+    """The machine's 1-minute load average (runnable and waiting tasks, ours included); NaN where unknown."""
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return float("nan")
+
+
+def contended(load_1m: float) -> bool:
+    """Whether a runtime taken at this load had to share the cores: more runnable tasks than cores on average
+    over the last minute (a lone job keeps the load at or below its own threads' count, at most the cores)."""
+    return load_1m > (os.cpu_count() or 1)
 
 
 def timing_mode(hydra_cfg: DictConfig) -> str:

@@ -3,6 +3,8 @@
 `hydra/launcher=slurm_cpu` / `slurm_gpu` (configs/hydra/launcher/) use `CheckedSlurmLauncher`, which, in the
 submitting process and before anything is submitted:
 
+* ends in one line where SLURM's commands are not on PATH (a machine without SLURM), and where any job's setting
+  is out of range (bench.harness.validate), before any data is prepared;
 * checks that the sweep directory, the store, the dataset root and submitit's folder are absolute-able paths on a
   file system the nodes can share (not /tmp, /var/tmp, /dev/shm, /run or a tmpfs: a node's private disk), unless
   `BENCH_SLURM_LOCAL_PATHS=1` (a single-node cluster); the jobs get them as absolute paths, so a job that starts in
@@ -10,8 +12,9 @@ submitting process and before anything is submitted:
 * generates the synthetic captures the sweep needs, once (jobs then find them cached and never generate);
 * points every job at one Warp kernel cache beside the store (`WARP_CACHE_PATH`; Warp >= 1.2 builds into a temp
   folder and renames it, so concurrent jobs may share it), instead of one /tmp folder per job;
-* sizes each cell's job: its name (`bench-<cell>`), GPUs (1 for device=cuda, none otherwise), CPUs per task
-  (at most what a node of the partition has: more would leave the job pending forever), with `mem_gb: 0` its
+* sizes each cell's job: its name (`bench-<cell>`, `bench-<cell>-offset_mm=2` with parameters), GPUs (1 for
+  device=cuda, none otherwise), CPUs per task (at most what a node of the partition has: more would leave the job
+  pending forever), with `mem_gb: 0` its
   memory from the cell (bench.harness.slurm_resources), and, with `timeout_min: 0`, a time limit from the cell
   (`time_limit_min`).
 
@@ -30,6 +33,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 import time
@@ -42,17 +46,21 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from submitit.core.utils import FailedJobError, UncompletedJobError
 
 from bench import cli
+from bench.harness import validate
+from bench.harness.identity import params_string
 from bench.harness.slurm_resources import job_mem_gb
 from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
 
+SLURM_NEEDED = ("sbatch", "srun", "squeue", "scancel")   # submit, submitit's job script, wait, cancel
 LOCAL_PREFIXES = ("/tmp", "/var/tmp", "/dev/shm", "/run")
 LOCAL_FS_TYPES = {"tmpfs", "ramfs", "devtmpfs"}
 POLL_S = 2.0
 CONTROLLER_LOST_S = 900.0   # squeue failing this long: report the pending jobs instead of waiting forever
 GONE_GRACE_S = 15.0         # a finished job's result file may show on a shared file system a little later
-# Minutes per capture frame on one node, generous (README "The main job" and notes/gpu.md measured ~20 min for
-# BP_max on the paper grid on 2 CPU cores, ~1 s for the FSK methods): (method, many frequencies?, grid, device).
+# Minutes per capture frame on one node, generous (docs/measurements/performance.md "The demo's cost" and
+# docs/measurements/gpu.md measured ~20 min for BP_max on the paper grid on 2 CPU cores, ~1 s for the FSK methods):
+# (method, many frequencies?, grid, device).
 FRAME_MINUTES = {("bp", True, "paper", "cpu"): 30.0, ("bp", False, "paper", "cpu"): 4.0,
                  ("bp", True, "paper", "cuda"): 0.2, ("bp", False, "paper", "cuda"): 0.1}
 DEFAULT_FRAME_MINUTES = {"bp": 1.0, "2fsk": 0.1, "3fsk": 0.1, "mm2fsk": 0.1}
@@ -81,6 +89,16 @@ def _mount_type(path: Path) -> str:
     except OSError:
         return ""
     return kind
+
+
+def check_slurm_commands(launcher: str) -> None:
+    """One error line (exit 2) before anything is prepared where SLURM's commands are not on PATH (a machine that
+    is not a SLURM submit host): which are missing, and how to run the sweep here instead."""
+    missing = [command for command in SLURM_NEEDED if shutil.which(command) is None]
+    if missing:
+        cli.fail(f"hydra/launcher={launcher}: SLURM's {', '.join(missing)} not found on PATH (this machine is not a "
+                 "SLURM submit host); run the sweep on this machine with hydra/launcher=local (parallel jobs) or "
+                 "without hydra/launcher (one job after another)")
 
 
 def check_shared(path: Path, what: str) -> None:
@@ -246,12 +264,17 @@ class CheckedSlurmLauncher(SlurmLauncher):
     def launch(self, job_overrides, initial_job_idx: int) -> list[JobReturn]:
         import submitit
 
+        check_slurm_commands(self.config.hydra.runtime.choices.get("hydra/launcher") or "slurm")
         paths = self._paths()
         try:
             for key, path in paths.items():
                 check_shared(path, key)
         except cli.UserError as err:
             cli.fail(str(err))
+        absolute = [f"hydra.sweep.dir={paths['hydra.sweep.dir']}", f"dataset.root={paths['dataset.root']}"]
+        if "store.dir" in paths:
+            absolute.append(f"store.dir={paths['store.dir']}")
+        job_configs = self._job_configs(job_overrides, initial_job_idx, absolute)
         self._prepare_data()
         if "store.dir" in paths:
             os.environ.setdefault("WARP_CACHE_PATH", str(paths["store.dir"] / "warp-cache"))
@@ -267,17 +290,12 @@ class CheckedSlurmLauncher(SlurmLauncher):
             print(f"cpus_per_task={cpus} is more than a node of the partition has ({available}): using {available}",
                   flush=True)
             cpus = available
-        absolute = [f"hydra.sweep.dir={paths['hydra.sweep.dir']}", f"dataset.root={paths['dataset.root']}"]
-        if "store.dir" in paths:
-            absolute.append(f"store.dir={paths['store.dir']}")
         paths["hydra.sweep.dir"].mkdir(parents=True, exist_ok=True)
         jobs, self._mem_gb = [], {}
-        for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
-            overrides = [*overrides, *absolute]
-            cfg = self.hydra_context.config_loader.load_sweep_config(self.config, overrides)
-            with open_dict(cfg.hydra.job):
-                cfg.hydra.job.num = idx          # the job folder's name (hydra.sweep.subdir) needs it
+        for idx, overrides, cfg in job_configs:
             cell = cfg.hydra.runtime.choices.get("cell") or f"{cfg.method.name}_{cfg.freq.name}_{cfg.prior.name}"
+            params = params_string(list(cfg.hydra.overrides.task))        # a parameter sweep's jobs apart
+            cell += f"-{params.replace(' ', ',')}" if params else ""
             captures = len(cfg.dataset.captures) if cfg.dataset.captures is not None else _count(paths)
             timeout = int(self.params.get("timeout_min") or 0) or time_limit_min(cfg, captures)
             gpus = 1 if str(cfg.device) == "cuda" else None
@@ -299,6 +317,23 @@ class CheckedSlurmLauncher(SlurmLauncher):
         if missing:
             self._report_missing(missing)
         return returns
+
+    def _job_configs(self, job_overrides, initial_job_idx: int, absolute: list[str]
+                     ) -> list[tuple[int, list, DictConfig]]:
+        """(job number, overrides, configuration) of every job, each checked (bench.harness.validate) before any
+        data is prepared or any job submitted: one line and exit 2 for the first setting out of range."""
+        configs = []
+        for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
+            overrides = [*overrides, *absolute]
+            cfg = self.hydra_context.config_loader.load_sweep_config(self.config, overrides)
+            try:
+                validate.check(cfg, memory=False)        # the nodes' memory is not this machine's
+            except cli.UserError as err:
+                cli.fail(str(err))
+            with open_dict(cfg.hydra.job):
+                cfg.hydra.job.num = idx          # the job folder's name (hydra.sweep.subdir) needs it
+            configs.append((idx, overrides, cfg))
+        return configs
 
     def _wait(self, jobs) -> tuple[list[JobReturn], list[tuple[str, str]]]:
         """Results of the jobs that finished, and (cell, cause) of those that did not."""

@@ -8,8 +8,8 @@ on the 2-core development machine, on synthetic captures (94 x 94 x 128 radar fr
 
 * BASE_MIB: the interpreter with numpy, scipy, Open3D, Warp, Hydra and pandas, one capture frame, its ground
   truth and an FSK method's maps (MM-2FSK, 2FSK, 3FSK differ by < 5 %).
-* FRAME_MIB: each further capture frame the job keeps (bench.harness.app keeps at most CAPTURES_KEPT frames and as many
-  ground truths: memory stops growing after that many, whatever `dataset.frame=all` selects).
+* FRAME_MIB: each further capture frame the job keeps (bench.harness.captures keeps at most CAPTURES_KEPT frames
+  and as many ground truths: memory stops growing after that many, whatever `dataset.frame=all` selects).
 * BP: on its compute grid's voxels (nx * ny * nz) the volume and search buffers; with many frequencies (BP_max)
   the range path holds the pairs' range profiles instead of the dense volume (measured: 442-443 MiB on both the
   paper grid and bp_cpu, two captures), so the larger of the two.
@@ -30,7 +30,7 @@ BASE_MIB = 360.0            # measured 249-269 MiB (one capture), 285-354 MiB (t
 FRAME_MIB = 35.0            # measured 31-36 MiB per further capture frame
 BP_VOXEL_BYTES = 11.5       # measured 11.3 B (BP d05, one capture: 466 MiB on the paper grid, 265 MiB on bp_cpu)
 RANGE_TABLE_MIB = 8836 * 2048 * 8 / 2**20   # BP_max's range profiles: pairs x 16 x 128 samples x complex64
-CAPTURES_KEPT = 16          # bench.harness.app.CAPTURES_KEPT (checked by tests/bench/harness/test_slurm_resources.py)
+CAPTURES_KEPT = 16          # bench.harness.captures.CAPTURES_KEPT (tests/bench/harness/test_slurm_resources.py)
 MARGIN = 1.5
 MIN_GB = 1
 CUDA_HOST_GB = 2

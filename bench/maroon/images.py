@@ -62,8 +62,8 @@ PNG_COMPRESS_LEVEL = 1     # zlib level of the PNGs a run writes: half the encod
                            # empty depth maps grow ~1.4x); the pixels are the same
 
 
-def write_uint16_png(path: Path, values: np.ndarray) -> None:
-    """Write a (H, W) uint16 array as a 16-bit PNG."""
+def write_uint16_png(path, values: np.ndarray) -> None:
+    """Write a (H, W) uint16 array as a 16-bit PNG into `path` (a path or a binary file object)."""
     if values.dtype != np.uint16 or values.ndim != 2:
         raise ValueError(f"expected a 2-D uint16 array, got {values.dtype} {values.shape}")
-    Image.fromarray(values).save(path, compress_level=PNG_COMPRESS_LEVEL)
+    Image.fromarray(values).save(path, format="PNG", compress_level=PNG_COMPRESS_LEVEL)

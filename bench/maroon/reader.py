@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -312,13 +313,22 @@ def read_radar_frame(radar_dir: Path, index: int, grid: RadarGrid, empty_filtere
     return RadarFrame(index=index, signal=signal, freqs_hz=freqs_hz, timestamp_s=timestamp_s, grid=grid, path=path)
 
 
+MAX_DECLARED_FRAMES = 10 ** 9      # frames one capture may declare (MAROON's have 1-300)
+
+
 def declared_frame_count(radar_dir: Path, first_frame: int) -> int | None:
     """`number_of_measurements` of the first frame file (the reference loader reads it from frame 0)."""
     path = radar_dir / "calibrated_data" / f"{first_frame:06d}.npy"
     with safe_io.use_root(radar_dir.parent):
         count = load_pickled_dict(path).get("number_of_measurements")
     count = count.item() if isinstance(count, np.generic) else count
-    return count if isinstance(count, int) and not isinstance(count, bool) else None
+    if not isinstance(count, int) or isinstance(count, bool):
+        return None
+    if not 0 <= count <= MAX_DECLARED_FRAMES:     # a huge integer cannot even be printed (Python's 4300 digits)
+        digits = int(count.bit_length() * 0.30103)
+        found = str(count) if abs(count) < 10 ** 30 else f"an integer of about {digits} digits"
+        raise DatasetError(path, f"number_of_measurements must be 0..{MAX_DECLARED_FRAMES:,}, found {found}")
+    return count
 
 
 # ----------------------------------------------------------------------------------------------- realsense
@@ -448,7 +458,8 @@ def read_mesh(path: Path) -> Mesh:
 # ------------------------------------------------------------------------------------------------- capture
 def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, ...] = PARTS,
                  empty_filtered: bool = False, antennas: AntennaArray | None = None,
-                 limits: Limits | None = None, realsense_frame: int | None = None) -> Capture:
+                 limits: Limits | None = None, realsense_frame: int | None = None,
+                 mesh_reader: Callable[[Path], Mesh] | None = None) -> Capture:
     """Read one capture folder `root/object/distance` into a Capture.
 
     `frame` is the radar frame index (-1 = last, as MAROON evaluates); `parts` chooses what to load. The radar is
@@ -457,7 +468,8 @@ def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, 
     nearest in time to the radar frame (bench.maroon.frames; MAROON's last frame without timestamps). A moving object's
     mesh pose at the radar frame (`photogrammetry/poses/NNNNNN.json`, written by the synthetic sequences) replaces
     `photogrammetry2radar`. Every file must lie inside the capture's dataset root (bench.maroon.safe_io) and within
-    `limits` (default: bench.maroon.limits.current_limits()).
+    `limits` (default: bench.maroon.limits.current_limits()). `mesh_reader` reads the mesh file (default
+    `read_mesh`; the harness passes one that keeps parsed meshes by content, bench.harness.captures).
     """
     capture_dir = Path(capture_dir)
     unknown = set(parts) - set(PARTS)
@@ -473,7 +485,8 @@ def read_capture(capture_dir: str | Path, *, frame: int = -1, parts: tuple[str, 
         if problem is not None:
             raise DatasetError(folder, f"cannot name a capture in results: {problem}")
     with use_limits(limits), safe_io.use_root(capture_dir):
-        return _read_capture(capture_dir, frame, parts, empty_filtered, antennas, realsense_frame)
+        return _read_capture(capture_dir, frame, parts, empty_filtered, antennas, realsense_frame,
+                             mesh_reader or read_mesh)
 
 
 def _check_erosion_kernel(capture_dir: Path, metadata: Metadata, grid: RadarGrid) -> None:
@@ -490,7 +503,8 @@ def _check_erosion_kernel(capture_dir: Path, metadata: Metadata, grid: RadarGrid
 
 
 def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
-                  antennas: AntennaArray | None, realsense_frame: int | None = None) -> Capture:
+                  antennas: AntennaArray | None, realsense_frame: int | None = None,
+                  mesh_reader: Callable[[Path], Mesh] = read_mesh) -> Capture:
     metadata = read_metadata(capture_dir)
     align_path = alignment_path(capture_dir, metadata)
     if not (align_path.exists() or align_path.is_symlink()):
@@ -528,7 +542,7 @@ def _read_capture(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_f
             capture.notes.append(f"{capture_dir / 'realsense'}: missing, no RealSense prior")
     if "mesh" in parts:
         if (capture_dir / "photogrammetry").is_dir():
-            capture.mesh = read_mesh(find_mesh(capture_dir / "photogrammetry"))
+            capture.mesh = mesh_reader(find_mesh(capture_dir / "photogrammetry"))
         else:
             capture.notes.append(f"{capture_dir / 'photogrammetry'}: missing, no ground truth")
     return capture

@@ -3,12 +3,13 @@
 `python -m bench.perf overhead --root DIR [--cells CELL ...] [--captures OBJECT/DISTANCE ...] [--device cpu|cuda]
 [--grid NAME] [--store] [--out DIR]` runs the cells (default: those of configs/experiment/table3.yaml) one after
 the other in one process through `bench.harness.app.run`, as the basic launcher runs a sweep's jobs (Hydra's per-job
-set-up is not included: time `python -m bench -m experiment=table3 ... hydra/launcher=basic` for that). The app's
-stages are timed where it calls them: reading captures (`reader.read_capture`: each capture is read once per
-frame and parts, then served from the app's cache), the ground truth (`metrics.evaluate.ground_truth`: once per
-capture, grid and object pose), the store's file list and digests, `methods.reconstruct` (its wall time and its
-own warm `total`), resampling and metrics, the store's reads and writes of finished cells (`store`), and the output
-files (depth PNG + JSON + preview, arrays.h5, results.csv).
+set-up is not included: `python -m bench.perf experiment` times whole sweeps). The app's stages are timed where it
+calls them: reading captures (`reader.read_capture`: each capture is read once per frame and parts, then served
+from bench.harness.captures' cache), the ground truth (its ray casts, its rasters kept in the store, its masks:
+once per capture, grid and object pose), the store's file list and digests, `methods.reconstruct` (its wall time
+and its own warm `total`), resampling and metrics, the store's reads and writes of finished cells (`store`), and
+the output files (depth PNG + JSON + preview, arrays.h5, results.csv; written in line here, not on the app's
+background thread, so that each second has one stage).
 `other` is the cell's wall time minus all of these. Without --store the result store is off (every cell
 computes). One row per cell and a `total` row: OUT/perf_overhead_<device>.csv (OUT = `--out`, default
 outputs/perf/). `--results-frames N [N ...]` times instead what results.csv costs over a sequence of N frames,
@@ -31,14 +32,25 @@ from bench.progress import each
 STAGES = ("read", "ground_truth", "store_key", "store", "method", "metrics", "outputs")
 
 
+class _InlineWriter:
+    """bench.harness.results.BackgroundWriter's interface, writing at once on the caller's thread."""
+
+    def submit(self, function, *args) -> None:
+        function(*args)
+
+    def close(self) -> None:
+        pass
+
+
 @contextlib.contextmanager
 def timed_stages(spent: dict):
     """Wrap the functions the app calls with timers adding seconds to `spent[stage]`; restore them afterwards."""
     import methods
-    from bench.harness import app, store
+    from bench.harness import app, captures, store
     from bench.maroon import reader
 
-    targets = [(reader, "read_capture", "read"), (app, "ground_truth", "ground_truth"),
+    targets = [(reader, "read_capture", "read"), (captures, "ground_truth_rasters_m", "ground_truth"),
+               (captures, "ground_truth_from_rasters", "ground_truth"), (captures, "load_kept", "ground_truth"),
                (app, "capture_files", "store_key"), (store.Store, "capture_digest", "store_key"),
                (store.Store, "get", "store"), (store.Store, "put", "store"), (store.Store, "copy_arrays", "outputs"),
                (methods, "reconstruct", "method"), (app, "resample_depth_m", "metrics"),
@@ -57,9 +69,12 @@ def timed_stages(spent: dict):
 
     for (owner, name, stage), (_, _, function) in zip(targets, originals, strict=False):
         setattr(owner, name, wrap(function, stage))
+    writer = app.BackgroundWriter
+    app.BackgroundWriter = _InlineWriter
     try:
         yield
     finally:
+        app.BackgroundWriter = writer
         for owner, name, function in originals:
             setattr(owner, name, function)
 

@@ -3,7 +3,7 @@
 `python -m bench.perf synth [--objects NAME ...] [--distance CM] [--preset realistic|ideal] [--paths nodes direct]
 [--out DIR]` builds each capture (`bench.synth.generate.build_capture`, into a temporary folder, no cache) once per
 path: `nodes` is the generator as it is (each block of scatterers at a few node frequencies, interpolated:
-bench.synth.frequency_nodes), `direct` computes every frequency (what generator version 7 did, per-frequency
+bench.synth.radar.frequency_nodes), `direct` computes every frequency (what generator version 7 did, per-frequency
 products). Stages are timed where the generator calls them, wall and process CPU seconds (all threads): the surface
 samples (ray casting), the radar echo (`simulate_frame`, multipath, wall), the depth camera, the ground-truth mesh,
 writing files; `other` is the rest (scene, noise, sums). With both paths, each capture's radar frames are compared
@@ -36,7 +36,11 @@ PATHS = ("nodes", "direct")
 @contextlib.contextmanager
 def timed_stages(spent: dict):
     """Wrap the functions the generator calls with timers adding [wall, cpu] seconds to `spent[stage]`."""
-    from bench.synth import depth_camera, multipath, photogrammetry, radar_scene, writer
+    from bench.synth import writer
+    from bench.synth.camera import depth as depth_camera
+    from bench.synth.camera import photogrammetry
+    from bench.synth.radar import multipath
+    from bench.synth.radar import scene as radar_scene
 
     targets = [(radar_scene, "visible_samples", "samples"), (radar_scene, "back_wall_samples", "samples"),
                (radar_scene, "simulate_frame", "radar_echo"), (multipath, "simulate_pairs", "radar_echo"),
@@ -68,7 +72,7 @@ def timed_stages(spent: dict):
 @contextlib.contextmanager
 def radar_path(path: str):
     """`nodes`: the generator as configured; `direct`: every frequency computed (no node interpolation)."""
-    from bench.synth import frequency_nodes
+    from bench.synth.radar import frequency_nodes
 
     share = frequency_nodes.MAX_NODE_SHARE
     frequency_nodes.MAX_NODE_SHARE = share if path == "nodes" else 0.0
@@ -98,7 +102,7 @@ def build(object_name: str, distance_cm: int, config, path: str, work: Path) -> 
 def frame_difference(nodes_dir: Path, direct_dir: Path, config) -> dict:
     """Largest |nodes - direct| over the peak |direct|, and rms(nodes - direct) over the frames' thermal noise
     (dB), over every radar frame file of one capture."""
-    from bench.synth.radar_model import thermal_noise_sigma
+    from bench.synth.radar.model import thermal_noise_sigma
 
     worst, squares, count, peak = 0.0, 0.0, 0, 0.0
     for direct_file in sorted(direct_dir.rglob("calibrated_data/*.npy")):

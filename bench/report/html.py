@@ -1,22 +1,24 @@
-"""`python -m bench.report SWEEP_ROOT [SWEEP_ROOT ...] [--out FILE] [--no-pictures]`: one self-contained HTML page.
+"""`python -m bench.report SWEEP_ROOT [SWEEP_ROOT ...] [--out FILE] [--no-pictures]`: one HTML page.
 
-For every sweep root (e.g. `outputs/demo/table2` and `outputs/demo/table3`): the table of means with its success
-counts (`ok`), the spread across captures (median and interquartile range of every metric over each row's
-successful captures), a per-object view (P per row and capture), the runtime-versus-error plot, the paper-style
-pictures per capture (bench.report.pictures: point clouds over the ground truth, depth / magnitude / signed-error
-panels;
-PLY files beside them), and per cell its Hydra overrides, full configuration, code version, device and host.
-Images are embedded (base64), so the page can be mailed or archived alone; nothing is loaded from the network.
+It opens with a verdict computed from the tables (bench.report.verdict): per table the best row per metric with
+its bootstrap interval and its paired margin over the runner-up, the runtime-against-error front, what the radar
+adds over the depth camera alone (where the table has that row) and why any row is marked. Then, for every sweep
+root (e.g. `outputs/demo/table2` and `outputs/demo/table3`): the table of means over the captures every row
+covers, with intervals, failures and the paired comparisons with the best row (bench.report.tables), the spread
+across those captures (median and interquartile range), a per-object view (P per row and capture, failures with
+their reasons), the runtime-versus-error plot, the paper-style pictures per capture (bench.report.pictures: point
+clouds over the ground truth, depth / magnitude / signed-error panels; PLY files beside them), and per cell its
+Hydra overrides, full configuration, code version, device and host. Images are files beside the page (linked by
+relative paths: keep the page with its sweep roots), so the page stays small; nothing is loaded from the network.
 Default output: `SWEEP_ROOT/report.html` (one root) or `report.html` in the roots' common folder. Pictures are
-written under `SWEEP_ROOT/pictures/` (several seconds per capture; `--no-pictures` leaves them out).
+written under `SWEEP_ROOT/pictures/` (several seconds per capture; `--no-pictures` leaves them out); pictures,
+plots and the page are redrawn only when their inputs changed (bench.report.keyed).
 """
 from __future__ import annotations
 
 import argparse
-import base64
 import html
 import os
-import time
 from pathlib import Path
 
 import numpy as np
@@ -44,10 +46,9 @@ _LOADED_CHECK = ("<script>window.addEventListener('load', () => { const images =
                  "images.filter(i => i.complete && i.naturalWidth > 0).length; });</script>")
 
 
-def _image(path: Path, alt: str) -> str:
-    """An <img> with the PNG embedded as a data URI."""
-    data = base64.b64encode(path.read_bytes()).decode("ascii")
-    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
+def _image(path: Path, alt: str, page_dir: Path) -> str:
+    """An <img> of the file at `path`, linked relative to the page's folder."""
+    return f'<img alt="{html.escape(alt)}" src="{html.escape(Path(os.path.relpath(path, page_dir)).as_posix())}">'
 
 
 def _job_dirs(root: Path) -> list[Path]:
@@ -71,51 +72,53 @@ def table_name(root: Path) -> str:
 
 
 def spread(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per summary row (bench.report.tables order): `ok/captures` and, per metric, 'median [q25, q75]' in cm over the
-    row's successful captures (the interquartile range says how much the captures disagree)."""
-    from bench.report import tables
+    """Per summary row (bench.report.tables order): failures and, per metric, 'median [q25, q75]' in cm over the
+    captures the table's means cover (the interquartile range says how much the captures disagree)."""
+    from bench.report import scoring, tables
 
     summary = tables.summarise(rows)
-    rows = rows.assign(_ok=tables.succeeded(rows))
+    outcome = scoring.outcomes(rows)
     lines = []
     for _, line in summary.iterrows():
-        match = np.logical_and.reduce([rows[c].eq(line[c]) for c in tables.GROUP_COLUMNS])
-        good = rows[match & rows._ok]
-        entry = {"": line.row, "ok": f"{line.ok}/{line.captures}"}
+        entry = {"": line.row, "failed": f"{line.failed}/{line.captures}"}
         for metric in tables.METRICS_CM:
-            values = good[metric].dropna()
+            matrix = scoring.metric_matrix(outcome, metric)
+            values = matrix.loc[line.row_id, scoring.common_captures(matrix)].dropna()
+            name = f"{tables.SHOWN_COLUMNS[metric]} median [IQR]"
             if values.empty:
-                entry[f"{metric[:-3]} median [IQR]"] = "–"
+                entry[name] = "–"
                 continue
             q25, q50, q75 = values.quantile(QUANTILES)
-            entry[f"{metric[:-3]} median [IQR]"] = f"{q50:.2f} [{q25:.2f}, {q75:.2f}]"
+            entry[name] = f"{q50:.2f} [{q25:.2f}, {q75:.2f}]"
         lines.append(entry)
     return pd.DataFrame(lines)
 
 
 def per_object(rows: pd.DataFrame, metric: str = "P_cm") -> pd.DataFrame:
-    """`metric` (cm) per summary row (lines) and capture (columns `object distance`), 'failed: <reason>' where a
-    metric is undefined and '–' where the row was not run on that capture."""
-    from bench.report import tables
+    """`metric` (cm) per summary row (lines) and capture (columns 'object distance cm', marked where the table's
+    means leave it out), 'failed: <reason>' where the row did not reconstruct the capture (with the metric where
+    it is still defined) and 'not run' where it has no result."""
+    from bench.report import scoring, tables
 
-    rows = rows.assign(_ok=tables.succeeded(rows), _label=[tables.row_label(m, f) for m, f in
-                                                           zip(rows.method, rows.freq, strict=False)],
-                       _capture=[f"{o} {d} cm" for o, d in zip(rows.object, rows.distance, strict=False)])
-    order = list(dict.fromkeys(tables.summarise(rows.drop(columns=["_ok", "_label", "_capture"])).row))
-    captures = sorted(rows._capture.unique())
-    table = pd.DataFrame({"": order})
-    for capture in captures:
-        cells = []
-        for label in order:
-            found = rows[(rows._label == label) & (rows._capture == capture)]
-            if found.empty:
-                cells.append("–")
-            elif not found._ok.all():
-                reason = str(found.get("failure", pd.Series([""])).fillna("").iloc[0]) or "metric undefined"
-                cells.append(f"failed: {reason}")
+    summary = tables.summarise(rows)
+    outcome = scoring.outcomes(rows)
+    matrix = scoring.metric_matrix(outcome, metric)
+    common = set(scoring.common_captures(matrix))
+    cells = outcome.set_index(["row_id", "capture"])
+    table = pd.DataFrame({"": summary.row})
+    for capture in sorted(outcome.capture.unique()):
+        column = []
+        for row_id in summary.row_id:
+            cell = cells.loc[(row_id, capture)]
+            value = cell[metric]
+            if cell.ok:
+                column.append(f"{value:.2f}")
+            elif cell.reason == scoring.NOT_RUN:
+                column.append(scoring.NOT_RUN)
             else:
-                cells.append(f"{found[metric].mean():.2f}")
-        table[capture] = cells
+                kept = f" ({value:.2f})" if np.isfinite(value) else ""
+                column.append(f"failed: {cell.reason}{kept}")
+        table[f"{capture} cm" + ("" if capture in common else " (not in the means)")] = column
     return table
 
 
@@ -124,11 +127,18 @@ def _html_table(table: pd.DataFrame) -> str:
 
 
 def _means_table(summary: pd.DataFrame) -> str:
-    """The table as bench.report.tables prints it (ok as k/N, † rows not comparable), best values in bold."""
+    """The table as bench.report.tables prints it (means with intervals, failures), best values in bold, then the
+    paired comparisons with the best row and the failures with their reasons."""
     from bench.report import tables
 
     shown = tables._formatted(summary, lambda text: f"\x00{text}\x01")
-    return _html_table(shown).replace("\x00", "<b>").replace("\x01", "</b>")
+    failures = tables.failures_list(summary)
+    return (_html_table(shown).replace("\x00", "<b>").replace("\x01", "</b>")
+            + "<p class='caption'>Paired with the best row of each metric, per capture on the captures of the means "
+              "(two-sided permutation test, not corrected for the number of comparisons):</p>"
+            + _html_table(tables.against_best(summary))
+            + ("<p class='caption'>Failures (captures a row did not reconstruct):</p><ul>"
+               + "".join(f"<li>{html.escape(line)}</li>" for line in failures) + "</ul>" if failures else ""))
 
 
 def _cells_section(root: Path, rows: pd.DataFrame) -> str:
@@ -177,15 +187,15 @@ def _realsense_priors(root: Path, stems: list[str]) -> dict[str, np.ndarray]:
     return priors
 
 
-def _pictures_section(root: Path) -> str:
-    """Writes the pictures (bench.report.pictures) under `root/pictures/` and embeds them, one block per capture."""
+def _pictures_section(root: Path, page_dir: Path) -> str:
+    """Writes the pictures (bench.report.pictures) under `root/pictures/` (unchanged ones are kept) and links
+    them, one block per capture."""
     from bench.report import pictures, tables
 
     runs = []
     for job in _job_dirs(root):
         if (job / "arrays.h5").is_file():
-            first = pd.read_csv(job / "results.csv", nrows=1)
-            runs.append((tables.row_label(first.method[0], first.freq[0]), job / "arrays.h5"))
+            runs.append((tables.job_label(job / "results.csv"), job / "arrays.h5"))
     if not runs:
         return "<p>No job wrote arrays.h5: no pictures.</p>"
     stems = pictures.capture_stems([path for _, path in runs])
@@ -194,50 +204,81 @@ def _pictures_section(root: Path) -> str:
     for stem, files in written.items():
         ply_dir = html.escape(str(root / "pictures" / "point_clouds" / stem))
         blocks.append(f"<h4>{html.escape(stem)}</h4><p class='caption'>Point clouds (PLY files in {ply_dir}):</p>"
-                      + _image(files["point_clouds"], f"{stem} point clouds")
+                      + _image(files["point_clouds"], f"{stem} point clouds", page_dir)
                       + "<p class='caption'>Depth, magnitude and signed error:</p>"
-                      + _image(files["panel"], f"{stem} panel"))
+                      + _image(files["panel"], f"{stem} panel", page_dir))
     return "\n".join(blocks)
 
 
-def root_section(root: Path, pictures: bool) -> tuple[str, str]:
-    """(table name, HTML section) of one sweep root."""
-    from bench.report import merge, plots, tables
+def _rows(root: Path) -> pd.DataFrame:
+    from bench.report import merge
 
-    rows = merge.merge(root) if not (root / "results.csv").is_file() else pd.read_csv(root / "results.csv")
+    return merge.merge(root) if not (root / "results.csv").is_file() else pd.read_csv(root / "results.csv")
+
+
+def verdict_section(roots: list[Path]) -> str:
+    """The page's opening: per sweep root the verdict (bench.report.verdict) as lists."""
+    from bench.report import tables, verdict
+
+    parts = ["<h2 id='verdict'>Verdict</h2>"]
+    for root in roots:
+        rows = _rows(root)
+        summary = tables.summarise(rows)
+        found = verdict.verdict(summary, tables.paired_comparisons(rows))
+        name = table_name(root)
+        parts.append(f"<h3>{html.escape(tables.TITLES.get(name, name))}</h3>")
+        parts.append("<p>Best mean per metric (95 % bootstrap interval over captures; the margin over the runner-up "
+                     "paired per capture):</p><ul>" + "".join(f"<li>{html.escape(t)}</li>" for t in found["best"])
+                     + "</ul>")
+        parts.append("".join(f"<p>{html.escape(t)}</p>" for t in found["front"]))
+        if found["baseline"]:
+            head, *lines = found["baseline"]
+            parts.append(f"<p>{html.escape(head)}</p><ul>" + "".join(f"<li>{html.escape(t)}</li>" for t in lines)
+                         + "</ul>")
+        head, *lines = found["marked"]
+        parts.append(f"<p>{html.escape(head)}</p>" + ("<ul>" + "".join(f"<li>{html.escape(t)}</li>" for t in lines)
+                                                     + "</ul>" if lines else ""))
+    return "\n".join(parts)
+
+
+def root_section(root: Path, pictures: bool, page_dir: Path) -> tuple[str, str]:
+    """(table name, HTML section) of one sweep root; images linked relative to `page_dir`."""
+    from bench.report import merge, tables
+
+    rows = _rows(root)
     name = table_name(root)
     summary = tables.summarise(rows)
-    plot = root / "runtime_vs_error.png"
-    if not plot.is_file():
-        plots.runtime_vs_error(summary, plot, f"{name}: runtime against error")
-    objects = ", ".join(sorted(rows.object.unique()))
-    distances = ", ".join(f"{d} cm" for d in sorted(rows.distance.unique()))
+    plot = merge.runtime_plot(root, name, summary)
     parts = [f"<h2 id='{html.escape(name)}'>{html.escape(tables.TITLES.get(name, name))} "
              f"<small>({html.escape(str(root))})</small></h2>",
-             f"<p class='caption'>{html.escape(tables.caption(name, rows))}</p>",
+             f"<p class='caption'>{html.escape(tables.caption(name, rows, summary=summary))}</p>",
              "<h3>Means over captures</h3>", _means_table(summary),
-             f"<h3>Spread across captures</h3><p class='caption'>Median and interquartile range [25 %, 75 %] of "
-             f"each metric (cm) over the row's successful captures ({objects}; {distances}).</p>",
+             "<h3>Spread across captures</h3><p class='caption'>Median and interquartile range [25 %, 75 %] of "
+             "each metric (cm) over the captures of the means.</p>",
              _html_table(spread(rows)),
              "<h3>Per object: P (cm)</h3>", _html_table(per_object(rows)),
-             "<h3>Runtime against error</h3>", _image(plot, f"{name} runtime against error")]
+             "<h3>Runtime against error</h3>", _image(plot, f"{name} runtime against error", page_dir)]
     if pictures:
-        parts += ["<h3>Pictures per capture</h3>", _pictures_section(root)]
+        parts += ["<h3>Pictures per capture</h3>", _pictures_section(root, page_dir)]
     parts += ["<h3>Cells: configuration and code version</h3>", _cells_section(root, rows)]
     return name, "\n".join(parts)
 
 
 def write_report(roots: list[Path], out: Path, pictures: bool | list[Path] = True) -> Path:
-    """The HTML page of the sweep roots at `out` (written atomically); returns `out`. `pictures`: for every root
-    (True), none (False) or the roots listed."""
+    """The HTML page of the sweep roots at `out` (written atomically, and only when its text changed); returns
+    `out`. `pictures`: for every root (True), none (False) or the roots listed."""
     chosen = [Path(p).resolve() for p in pictures] if isinstance(pictures, list) else None
-    sections = [root_section(root, bool(pictures) if chosen is None else root.resolve() in chosen) for root in roots]
+    page_dir = out.parent.resolve()
+    sections = [root_section(root, bool(pictures) if chosen is None else root.resolve() in chosen, page_dir)
+                for root in roots]
     nav = " ".join(f"<a href='#{html.escape(name)}'>{html.escape(name)}</a>" for name, _ in sections)
     page = (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>mm2fsk-bench report</title>"
             f"<style>{_STYLE}</style></head><body><h1>mm2fsk-bench report</h1>"
-            f"<p class='caption'>Written {time.strftime('%Y-%m-%d %H:%M:%S %Z')} from "
-            f"{html.escape(', '.join(map(str, roots)))}.</p><nav>{nav}</nav>"
+            f"<p class='caption'>From {html.escape(', '.join(map(str, roots)))}; images are the files beside it."
+            f"</p><nav><a href='#verdict'>verdict</a> {nav}</nav>" + verdict_section(roots)
             + "\n".join(body for _, body in sections) + f"{_LOADED_CHECK}</body></html>\n")
+    if out.is_file() and out.read_text(encoding="utf-8") == page:
+        return out
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.tmp")
     tmp.write_text(page, encoding="utf-8")

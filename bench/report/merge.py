@@ -1,13 +1,16 @@
 """After a multirun: merge the jobs' rows into the sweep root and write its table and plots (a Hydra callback).
 
 Sweep root after `python -m bench -m experiment=table3`: `results.csv` (every job's rows), `table3.md`, `.csv`,
-`.tex` (bench.report.tables), `runtime_vs_error.png` and, with `report.depth_errors=true`,
+`.tex` and `table3_pairs.csv` (bench.report.tables: every pair of rows compared per capture),
+`runtime_vs_error.png` (redrawn only when the table changed) and, with `report.depth_errors=true`,
 `depth_errors/<object>_<distance>_<frame>.png` (bench.report.plots; off by default: the figures cost more than the
 rest of the merge).
 `python -m bench.report.merge ROOT [--table NAME]` does the same for a sweep that was interrupted before the end.
 """
 from __future__ import annotations
 
+import csv
+import io
 from pathlib import Path
 
 import pandas as pd
@@ -17,6 +20,7 @@ from omegaconf import DictConfig
 from bench import cli
 from bench.harness.results import write_results
 from bench.report import tables
+from methods.domain.errors import DatasetError
 
 
 def job_files(root: Path, name: str) -> list[Path]:
@@ -24,18 +28,39 @@ def job_files(root: Path, name: str) -> list[Path]:
     return sorted(root.glob(f"*/{name}"), key=lambda p: int(p.parent.name.split("_")[0]))
 
 
+def read_job_rows(path: Path) -> pd.DataFrame:
+    """A job's results.csv, every line whole: a line cut mid-row (a job killed while appending it, a full disk) or
+    a row with another number of fields than the header is a DatasetError naming the file and line, never a row
+    read with its last values missing or cut short."""
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8")
+        lines = list(csv.reader(io.StringIO(text, newline="")))
+    except (UnicodeDecodeError, csv.Error) as err:
+        raise DatasetError(path, f"not a results table ({err})") from None
+    if not lines:
+        raise DatasetError(path, "is empty (the job wrote no row)")
+    if not data.endswith(b"\n"):
+        raise DatasetError(path, f"line {len(lines)} is cut mid-row (a job killed, or a disk full, while writing it): "
+                                 "run the sweep again (the store keeps the finished cells) or delete that line")
+    short = next((n for n, line in enumerate(lines[1:], 2) if len(line) != len(lines[0])), None)
+    if short is not None:
+        raise DatasetError(path, f"line {short} has {len(lines[short - 1])} fields, the header {len(lines[0])}")
+    return pd.read_csv(io.StringIO(text))
+
+
 def merge(root: Path) -> pd.DataFrame:
     """Concatenate `root/*/results.csv` (job order) into `root/results.csv` (atomic); returns the rows."""
     parts = job_files(root, "results.csv")
     if not parts:
         raise FileNotFoundError(f"{root}: no job wrote */results.csv")
-    rows = pd.concat([pd.read_csv(p) for p in parts], ignore_index=True)
+    rows = pd.concat([read_job_rows(p) for p in parts], ignore_index=True)
     return write_results(root / "results.csv", rows.to_dict("records"))
 
 
 def report(root: Path, table: str | None, depth_errors: bool = False) -> pd.DataFrame:
-    """Merge the rows; with a table name also write the table (md, csv, tex) and the runtime plot, and with
-    depth_errors the per-capture depth-error figures; returns the summary."""
+    """Merge the rows; with a table name also write the table (md, csv with its pairs, tex) and the runtime plot,
+    and with depth_errors the per-capture depth-error figures; returns the summary."""
     from bench.report import (
         plots,  # matplotlib (~1 s): only at the end of a sweep, not in every run that loads the callback
     )
@@ -43,23 +68,42 @@ def report(root: Path, table: str | None, depth_errors: bool = False) -> pd.Data
     rows = merge(root)
     summary = tables.summarise(rows)
     if table is not None:
-        text = tables.caption(table, rows)
+        text = tables.caption(table, rows, summary=summary)
         (root / f"{table}.md").write_text(f"{text}\n\n{tables.summary_markdown(summary)}\n")
-        summary.to_csv(root / f"{table}.csv", index=False, float_format="%.4f")
+        tables.write_csv(summary, root / f"{table}.csv", tables.paired_comparisons(rows))
         (root / f"{table}.tex").write_text(tables.summary_latex(summary, text))
-        plots.runtime_vs_error(summary, root / "runtime_vs_error.png", f"{table}: runtime against error")
+        runtime_plot(root, table, summary)
     if table is not None and depth_errors:
-        runs = [(tables.row_label(*pd.read_csv(p.parent / "results.csv").loc[0, ["method", "freq"]]), p)
-                for p in job_files(root, "arrays.h5")]
+        runs = [(tables.job_label(p.parent / "results.csv"), p) for p in job_files(root, "arrays.h5")]
         plots.depth_error_maps(runs, root / "depth_errors")
     return summary
+
+
+def runtime_plot(root: Path, table: str, summary: pd.DataFrame) -> Path:
+    """`root/runtime_vs_error.png` (bench.report.plots), redrawn only when the summary or the plotting code changed
+    (bench.report.keyed)."""
+    from bench.report import keyed, plots
+
+    path = root / "runtime_vs_error.png"
+    key = keyed.digest(summary.to_csv(), table, keyed.module_source(plots))
+    keys = keyed.Keys(root)
+    if not keys.fresh(path.name, key, [path]):
+        plots.runtime_vs_error(summary, path, f"{table}: runtime against error")
+        keys.record(path.name, key)
+    return path
 
 
 class MergeResults(Callback):
     """Hydra callback (configs/config.yaml `hydra.callbacks.merge`): `report` at the end of every multirun."""
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
-        report(Path(config.hydra.sweep.dir), config.report.table, config.report.get("depth_errors", False))
+        try:
+            report(Path(config.hydra.sweep.dir), config.report.table, config.report.get("depth_errors", False))
+        except Exception as err:   # noqa: BLE001 -- a file or disk problem in one line (bench.cli); bugs re-raised
+            message = cli.error_line(err)
+            if message is None:
+                raise
+            cli.fail(message)
 
 
 def main() -> int:

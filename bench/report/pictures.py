@@ -35,11 +35,14 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from bench.report import keyed  # noqa: E402
+
 SIGNED_ERROR_LIMIT_CM = 2.0      # colour range of the signed error: +-2 cm, beyond saturates (arrows on the bar)
 MAGNITUDE_RANGE_DB = 20.0        # magnitude colours span the strongest pixel down to -20 dB (the filter keeps -14)
 NO_DEPTH_COLOUR = "#9a9a9a"      # grey: distinct from white (zero error) and from both ends of the diverging map
 NO_TRUTH_COLOUR = "#000000"      # black: the method returned depth where the ground truth has no surface
 GT_COLOUR = "#b8b8b8"
+CELLS_PER_ROW = 4                # point-cloud columns per row of a figure: about 1200 px wide, legible in a browser
 RENDERERS = ("open3d", "matplotlib")
 _PROBE = """
 import numpy as np, open3d as o3d
@@ -226,7 +229,8 @@ def _subsample(points: np.ndarray, *arrays: np.ndarray, at_most: int = 8000) -> 
 def point_cloud_figure(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path, ply_dir: Path | None = None,
                        use: str | None = None) -> Path:
     """Figs. 4-5 for one capture: per cell a perspective, side and top view of the radar points (magnitude
-    colours) over the ground truth (grey); writes PLY files into `ply_dir` when given. `use`: the renderer of the
+    colours) over the ground truth (grey), CELLS_PER_ROW cells side by side; writes PLY files into `ply_dir` when
+    given. `use`: the renderer of the
     perspective view (default `renderer()`)."""
     use = use or renderer()
     truth = next(cell for _, cell in cells)
@@ -234,27 +238,29 @@ def point_cloud_figure(cells: list[tuple[str, CaptureArrays]], stem: str, path: 
     if ply_dir is not None:
         write_ply(ply_dir / stem / "ground_truth.ply", gt_points, np.tile(matplotlib.colors.to_rgb(GT_COLOUR),
                                                                           (len(gt_points), 1)))
-    ncols = len(cells)
-    fig = plt.figure(figsize=(2.6 * ncols + 1.2, 8.4), layout="constrained")
-    grid = fig.add_gridspec(3, ncols)
+    ncols = min(len(cells), CELLS_PER_ROW)
+    blocks = -(-len(cells) // ncols)
+    fig = plt.figure(figsize=(2.6 * ncols + 1.2, 8.4 * blocks), layout="constrained")
+    grid = fig.add_gridspec(3 * blocks, ncols)
     gt_shown = _subsample(gt_points)[0]
     clouds = [points_m(c.depth_m, c.x_m, c.y_m)[0] for _, c in cells]
     x_cm, y_cm, z_cm = (_window_cm(gt_points, clouds, axis) for axis in range(3))
-    for col, (label, cell) in enumerate(cells):
+    for number, (label, cell) in enumerate(cells):
+        block, col = divmod(number, ncols)
         points, index = points_m(cell.depth_m, cell.x_m, cell.y_m)
         level_db, colours = _magnitude_colours(cell, index)
         if ply_dir is not None:
             write_ply(ply_dir / stem / f"{_file_name(label)}.ply", points, colours)
         shown, shown_colours = _subsample(points, colours)
         if use == "open3d":
-            ax = fig.add_subplot(grid[0, col])
+            ax = fig.add_subplot(grid[3 * block, col])
             ax.imshow(render_open3d(shown, shown_colours, gt_shown))
             ax.set_axis_off()
         else:
-            ax = fig.add_subplot(grid[0, col], projection="3d")
+            ax = fig.add_subplot(grid[3 * block, col], projection="3d")
             _draw_perspective_matplotlib(ax, shown, shown_colours, gt_shown)
         ax.set_title(f"{label}\n{len(points)} points", fontsize=8)
-        side, top = fig.add_subplot(grid[1, col]), fig.add_subplot(grid[2, col])
+        side, top = fig.add_subplot(grid[3 * block + 1, col]), fig.add_subplot(grid[3 * block + 2, col])
         side.scatter(gt_shown[:, 2] * 100, gt_shown[:, 1] * 100, s=0.3, c=GT_COLOUR, rasterized=True)
         side.scatter(shown[:, 2] * 100, shown[:, 1] * 100, s=0.5, c=shown_colours, rasterized=True)
         side.set(xlabel="z, depth (cm)", ylabel="y (cm)", xlim=z_cm, ylim=y_cm, title="side view (array left)")
@@ -382,16 +388,33 @@ def _capture_pictures(runs: list[tuple[str, Path]], stem: str, out_dir: Path, pr
                       ply: bool, use: str) -> dict[str, Path]:
     """Both figures (and the PLY files) of one capture; runs in a worker process of sweep_pictures."""
     cells = [(label, arrays) for label, path in runs if (arrays := read_arrays(path, stem)) is not None]
-    return {"point_clouds": point_cloud_figure(cells, stem, out_dir / "point_clouds" / f"{stem}.png",
+    files = picture_files(out_dir, stem)
+    return {"point_clouds": point_cloud_figure(cells, stem, files["point_clouds"],
                                                out_dir / "point_clouds" if ply else None, use=use),
-            "panel": capture_panel(cells, stem, out_dir / "panels" / f"{stem}.png", prior_m)}
+            "panel": capture_panel(cells, stem, files["panel"], prior_m)}
+
+
+def _key(runs: list[tuple[str, Path]], stem: str, prior_m: np.ndarray | None, ply: bool, use: str) -> str:
+    """Content key of one capture's pictures: the cells' labels and arrays, the prior, the options and this code."""
+    parts = [stem, ply, use, Path(__file__)]
+    for label, path in runs:
+        arrays = read_arrays(path, stem)
+        if arrays is not None:
+            parts += [label, arrays.depth_m, arrays.gt_depth_m, arrays.magnitude, arrays.x_m, arrays.y_m]
+    return keyed.digest(*parts, prior_m if prior_m is not None else "no prior")
+
+
+def picture_files(out_dir: Path, stem: str) -> dict[str, Path]:
+    """Where the pictures of capture `stem` go under `out_dir`."""
+    return {"point_clouds": out_dir / "point_clouds" / f"{stem}.png", "panel": out_dir / "panels" / f"{stem}.png"}
 
 
 def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str, np.ndarray] | None = None,
                    ply: bool = True, workers: int | None = None) -> dict[str, dict[str, Path]]:
     """Point-cloud figures (+ PLY) and panels of every capture of the runs ((label, arrays.h5) pairs) under
-    `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}. Captures
-    are drawn in `workers` processes (default: one per CPU core; matplotlib draws on one core)."""
+    `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}. A capture
+    whose inputs (arrays, labels, prior, options, this module) are unchanged since it was drawn is not redrawn
+    (bench.report.keyed); the others are drawn in `workers` processes (default: one per CPU core)."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
@@ -399,13 +422,19 @@ def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str
 
     use = renderer()
     stems = capture_stems([path for _, path in runs])
-    workers = max(1, min(len(stems), workers or os.cpu_count() or 1))
-    written = {}
-    with bar(len(stems), f"pictures ({use})", unit="capture") as progress, \
+    keys = keyed.Keys(out_dir)
+    wanted = {stem: _key(runs, stem, (priors or {}).get(stem), ply, use) for stem in stems}
+    stale = [stem for stem in stems if not keys.fresh(stem, wanted[stem], list(picture_files(out_dir, stem).values()))]
+    written = {stem: picture_files(out_dir, stem) for stem in stems}
+    if not stale:
+        return written
+    workers = max(1, min(len(stale), workers or os.cpu_count() or 1))
+    with bar(len(stale), f"pictures ({use}, {len(stems) - len(stale)} unchanged)", unit="capture") as progress, \
             ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = {stem: pool.submit(_capture_pictures, runs, stem, out_dir, (priors or {}).get(stem), ply, use)
-                   for stem in stems}
+                   for stem in stale}
         for stem, future in futures.items():
             written[stem] = future.result()
+            keys.record(stem, wanted[stem])
             progress.update()
     return written

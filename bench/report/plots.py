@@ -12,6 +12,7 @@ import pandas as pd  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+MARKERS = "osD^vP*Xph<>"   # the rows of one method in the runtime plot (its colour), repeating beyond 12
 ERROR_LIMIT_CM = 2.0     # colour scale of the signed error maps: -2 .. +2 cm (larger errors saturate)
 
 
@@ -24,33 +25,35 @@ def pareto_front(runtime_ms: np.ndarray, error_cm: np.ndarray) -> np.ndarray:
 
 
 def runtime_vs_error(summary: pd.DataFrame, path: Path, title: str) -> Path:
-    """Mean runtime (ms, log) against mean P (cm, log) per summary row (bench.report.tables.summarise), the Pareto front
-    marked and joined. Only rows with a runtime measured alone are drawn; rows that failed on some capture are
-    drawn hollow and take no part in the front (their mean covers fewer captures)."""
+    """Mean runtime (ms, log) against mean P (cm, log) per summary row (bench.report.tables.summarise: every row's
+    P over the same captures), the Pareto front marked and joined. Each row is named in the legend (colour: method,
+    marker: the row within its method), never by a label on the plot, so no two names can overlap. Only rows with
+    a runtime measured alone are drawn; rows that failed on some capture are drawn hollow."""
     shown = summary[np.isfinite(summary.runtime_ms) & np.isfinite(summary.P_cm)]
-    fig, ax = plt.subplots(figsize=(8.5, 5.0))
-    for method, group in shown.groupby("method", sort=False):
-        colour = ax.scatter([], [], s=30).get_facecolor()[0]
-        ax.scatter(group.runtime_ms, group.P_cm, label=method, s=30,
-                   facecolors=[colour if ok else "none" for ok in group.comparable], edgecolors=[colour])
-        for _, row in group.iterrows():
-            label = row.row if row.comparable else f"{row.row} (failed {row.captures - row.ok}/{row.captures})"
-            ax.annotate(label, (row.runtime_ms, row.P_cm), fontsize=7, xytext=(3, 3), textcoords="offset points")
-    ranked = shown[shown.comparable]
-    front = ranked[pareto_front(ranked.runtime_ms, ranked.P_cm)].sort_values("runtime_ms")
+    fig, ax = plt.subplots(figsize=(9.0, 5.0))
+    colours = plt.get_cmap("tab10")
+    for number, (_, group) in enumerate(shown.groupby("method", sort=False)):
+        colour = colours(number % 10)
+        for position, (_, row) in enumerate(group.iterrows()):
+            marker = MARKERS[position % len(MARKERS)]
+            failed = int(row.get("failed", 0))
+            label = row.row if not failed else f"{row.row} (failed {failed}/{row.captures})"
+            ax.scatter(row.runtime_ms, row.P_cm, s=42, marker=marker, label=label, edgecolors=[colour],
+                       facecolors="none" if failed else [colour], linewidths=1.2)
+    front = shown[pareto_front(shown.runtime_ms, shown.P_cm)].sort_values("runtime_ms")
     ax.step(front.runtime_ms, front.P_cm, where="post", color="k", lw=1, ls="--")
-    ax.scatter(front.runtime_ms, front.P_cm, s=120, facecolors="none", edgecolors="k", label="Pareto front")
+    ax.scatter(front.runtime_ms, front.P_cm, s=150, facecolors="none", edgecolors="k", label="Pareto front")
     missing = len(summary) - len(shown)
     note = f"\n{missing} of {len(summary)} rows have no runtime measured alone and are not drawn" if missing else ""
-    ax.set(xlabel="runtime per frame, measured alone (ms)", ylabel="mean P (cm)", title=f"{title}{note}")
+    ax.set(xlabel="runtime per frame, measured alone (ms)", ylabel="mean P (cm), same captures for every row",
+           title=f"{title}{note}")
     if len(shown):
         ax.set(xscale="log", yscale="log")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     else:
         ax.text(0.5, 0.5, "no runtime measured alone\n(run the sweep one job at a time)", ha="center",
                 transform=ax.transAxes)
     ax.grid(True, which="both", alpha=0.3)
-    if len(shown):
-        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -62,17 +65,24 @@ def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path) -> list[Path]:
 
     Diverging colours (red: the radar put the surface behind the truth, blue: in front; a wrap shows its
     direction), saturating at +-ERROR_LIMIT_CM; "no depth" in grey, depth where the ground truth has no surface in
-    black (bench.report.pictures). runs: (label, arrays.h5 of the run) pairs; every capture found gets a figure.
+    black (bench.report.pictures). runs: (label, arrays.h5 of the run) pairs; every capture found gets a figure,
+    redrawn only when its cells' labels or arrays (or this code) changed (bench.report.keyed).
     """
-    from bench.report import pictures
+    from bench.report import keyed, pictures
 
     out_dir.mkdir(parents=True, exist_ok=True)
     error_map = plt.get_cmap("RdBu_r").with_extremes(bad=pictures.NO_DEPTH_COLOUR)
     overlay_map = ListedColormap([pictures.NO_DEPTH_COLOUR, pictures.NO_TRUTH_COLOUR])
-    paths = []
+    paths, keys = [], keyed.Keys(out_dir)
     for stem in pictures.capture_stems([h5_path for _, h5_path in runs]):
         cells = [(label, arrays) for label, h5_path in runs
                  if (arrays := pictures.read_arrays(h5_path, stem)) is not None]
+        path = out_dir / f"{stem}.png"
+        key = keyed.digest(Path(__file__), *(part for label, a in cells
+                                             for part in (label, a.depth_m, a.gt_depth_m, a.x_m, a.y_m)))
+        paths.append(path)
+        if keys.fresh(stem, key, [path]):
+            continue
         xlim, ylim = pictures.crop_cm([arrays for _, arrays in cells])
         ncols = min(len(cells), 7)
         nrows = -(-len(cells) // ncols)
@@ -99,8 +109,7 @@ def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path) -> list[Path]:
                             Patch(color=error_map(0.0), label="in front of it")],
                    loc="outside lower center", ncols=4, fontsize=7, frameon=False)
         fig.suptitle(f"{stem}: signed depth error per method (radar space, x and y in cm)", fontsize=9)
-        path = out_dir / f"{stem}.png"
         fig.savefig(path, dpi=100)
         plt.close(fig)
-        paths.append(path)
+        keys.record(stem, key)
     return paths

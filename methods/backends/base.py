@@ -70,6 +70,18 @@ class Backend:
         a backend may prepare the frame's inputs once."""
         return lambda points_m: self.correlate_summed(signal, freqs_hz, tx_m, rx_m, points_m)
 
+    def search_depth(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, plan, threshold_db, z_edges_are_grid_edges,
+                     hull_m=None):
+        """BP's coarse-to-fine search (`methods.skips.bp_search.search_depth`, `plan` its SearchPlan) where the data
+        lives: (depth_m, max projection, samples evaluated), or None where this backend leaves it to the host.
+        `hull_m` (K, 3): points whose box holds every point a frame's calls search (tables built once per frame)."""
+        return None
+
+    def coarse_peaks(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, step, hull_m=None):
+        """The coarse ROI's pass where the data lives: per pixel (x_m, y_m) the maximum of |V| over every step-th
+        depth of z_m and the last, the first depth index holding it, and the samples evaluated; or None (host)."""
+        return None
+
     def volume(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, method: str = "auto") -> np.ndarray:
         """complex64 (nz, ny, nx) frequency-summed phasors on the grid (axes in the order the vectors are given)."""
         raise NotImplementedError
@@ -108,6 +120,13 @@ class Backend:
         """Two-frequency depth at a device-resident prior, where it lives: (depth_m, magnitude, prior_m) (ny, nx);
         `roi_pixels` (ny, nx) bool restricts the correlated pixels where `prior.takes_roi`."""
         raise NotImplementedError(f"{type(self).__name__} holds no device-resident priors")
+
+    def mm3fsk_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, prior: Prior, coarse: list[int],
+                        threshold_db: float | None, timer, roi_pixels: np.ndarray | None = None):
+        """MM-3FSK (`methods.mm3fsk`, `coarse` the coarse pair's indices) at a device-resident prior where it lives:
+        ((depth_m, magnitude, prior_m) (ny, nx), prior offset m), the correlated pixels restricted to `roi_pixels`
+        (ny, nx) bool; or None where this backend leaves it to the host."""
+        return None
 
     def warm_up(self, signal, freqs_hz, tx_m, rx_m, *, volume: bool, prior: bool) -> None:
         """Compile what a timed run will need (nothing to compile on the numpy backend)."""

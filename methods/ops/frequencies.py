@@ -32,9 +32,16 @@ def config_targets_ghz(name: str) -> tuple[float, ...] | None:
 
 
 def select_frequencies(freqs_hz: np.ndarray, targets_ghz: tuple[float, ...] | list[float]) -> np.ndarray:
-    """Indices (ascending) of the frame frequencies nearest to each target; error if two targets share one."""
+    """Indices (ascending) of the frame frequencies nearest to each target; error if a target lies outside the
+    frame's band (by more than half its largest frequency step: the nearest frequency would be another one) or two
+    targets share one frame frequency."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     targets_hz = np.asarray(targets_ghz, dtype=np.float64) * 1e9
+    slack_hz = 0.5 * float(np.diff(freqs_hz).max(initial=0.0))
+    outside = [t for t in targets_hz if not freqs_hz.min() - slack_hz <= t <= freqs_hz.max() + slack_hz]
+    if outside:
+        raise UsageError(f"target frequency {outside[0] / 1e9:g} GHz lies outside the frame's band "
+                         f"{freqs_hz.min() / 1e9:.3f}-{freqs_hz.max() / 1e9:.3f} GHz")
     indices = np.argmin(np.abs(freqs_hz[None, :] - targets_hz[:, None]), axis=1)
     if len(np.unique(indices)) != len(indices):
         chosen = ", ".join(f"{t:.3f} GHz -> {freqs_hz[i] / 1e9:.3f} GHz" for t, i in zip(targets_ghz, indices,

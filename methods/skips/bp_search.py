@@ -48,6 +48,8 @@ from methods.ops.depth_peak import peak_depth_m
 from methods.skips.roi import Roi, dilate, lattice
 
 Evaluate = Callable[[np.ndarray], np.ndarray]      # points (N, 3) m -> frequency-summed correlation (N,) complex
+# (x_m, y_m, z_m, step) -> (coarse maximum (N,), its first depth index (N,), samples evaluated), or None: the host
+CoarsePeaks = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], "tuple[np.ndarray, np.ndarray, int] | None"]
 BATCH_POINTS = 1 << 16                             # points per evaluate call (128 frequencies: 64 MB of phasors)
 
 
@@ -266,7 +268,8 @@ def _climb(samples: _Samples, active: np.ndarray) -> None:
 
 def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray,
                plan_of: Callable[[np.ndarray, np.ndarray], SearchPlan], threshold_db: float, lattice_step_px: int,
-               radius_px: int, keep_margin_db: float, margin_m: float) -> tuple[Roi, int]:
+               radius_px: int, keep_margin_db: float, margin_m: float, coarse_peaks: CoarsePeaks | None = None
+               ) -> tuple[Roi, int]:
     """The object's ROI from a coarse pass: depth samples at twice the search plan's coarse step (`plan_of(x, y)`)
     at the lattice pixels (every `lattice_step_px`-th) of `pixels` (ny, nx) bool; x_m, y_m (ny, nx) pixel centres;
     z_m the depths inside the current ROI.
@@ -278,9 +281,13 @@ def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.
     grid_lattice = lattice(pixels, lattice_step_px)
     x_l, y_l = x_m[grid_lattice], y_m[grid_lattice]
     step = np.minimum(2 * plan_of(x_l, y_l).step, max(len(z_m) - 1, 1))
-    samples = _Samples(evaluate, x_l, y_l, z_m)
-    peak = samples.run_coarse(step)
-    peak_z = z_m[np.argmax(samples.mag, axis=0)]              # unevaluated samples hold -1: never the argmax
+    found = coarse_peaks(x_l, y_l, z_m, step) if coarse_peaks is not None else None
+    if found is None:
+        samples = _Samples(evaluate, x_l, y_l, z_m)
+        peak = samples.run_coarse(step)
+        found = peak, np.argmax(samples.mag, axis=0), samples.count   # unevaluated hold -1: never the argmax
+    peak, peak_k, n_evaluated = found
+    peak_z = z_m[peak_k]
     strong = peak >= peak.max() * 10.0 ** (-(threshold_db + keep_margin_db) / 20.0)
     marked = np.zeros_like(pixels)
     marked[grid_lattice] = strong
@@ -288,4 +295,4 @@ def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.
     dz_m = z_m[1] - z_m[0] if len(z_m) > 1 else 0.0
     pad_m = step[strong] * dz_m + margin_m
     return (Roi(roi_pixels, float(np.min(peak_z[strong] - pad_m)), float(np.max(peak_z[strong] + pad_m)),
-                ("coarse",)), samples.count)
+                ("coarse",)), n_evaluated)

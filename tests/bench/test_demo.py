@@ -17,7 +17,9 @@ def _fake_sweep(experiment, root, out, store, synth="realistic", distances_cm=No
     for name in demo.REPORT_FILES:
         (folder / name.format(table=experiment)).write_text(f"{experiment}\n")
     (folder / "depth_errors" / "01_plate_30_000000.png").write_bytes(b"png")
-    rows = pd.DataFrame({"object": ["01_plate"], "distance": [30], "method": ["mm2fsk"], "freq": ["d10"],
+    rows = pd.DataFrame({"object": ["01_plate"], "distance": [30], "frame": [0], "method": ["mm2fsk"], "freq": ["d10"],
+                         "prior": ["photogrammetry" if experiment == "table2" else "realsense"],
+                         "grid": ["from_capture"],
                          **{m: [0.1] for m in ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm")}, "timing": ["alone"],
                          "cached": [False]})
     rows.to_csv(folder / "results.csv", index=False)
@@ -70,7 +72,7 @@ def test_update_results_copies_tables_plots_and_baselines(monkeypatch, tmp_path)
     assert {p.name for p in results.iterdir()} == {"table1.csv", "table1.md", "table2", "table3", "agreement.md"}
     assert (results / "table3" / "runtime_vs_error.png").is_file()
     report = (results / "agreement.md").read_text()
-    assert "| MM-2FSK Δ10.0 | 1/1 | 0.10 | 0.82 |" in report                        # from the sweep rows
+    assert "| MM-2FSK Δ10.0 | 0/1 | 0.10 | 0.82 |" in report                        # from the sweep rows
     assert "## Placement against" in report and "| 01_plate | 30." in report       # measured on the capture
     assert (results / "table3" / "depth_errors" / "01_plate_30_000000.png").is_file()
     baseline = pd.read_csv(results / "table2" / "results.csv")
@@ -93,3 +95,15 @@ def test_the_reason_of_a_hydra_error_is_its_headline_or_exception():
                  '  File "bench/harness/app.py", line 1, in main', "RuntimeError: out of memory", "", hint]
     assert demo._reason(traceback) == "RuntimeError: out of memory"
     assert demo._reason(["warning: slow", "error: data/x: no captures found"]) == "data/x: no captures found"
+
+
+def test_the_demo_says_up_front_how_long_it_takes_and_which_step_is_long(tmp_path):
+    from bench.demo import demo_captures, plan
+
+    objects, _ = demo_captures([30])
+    missing = plan(tmp_path / "none", tmp_path / "store", [30])
+    assert f"generating {len(objects)} of {len(objects)} captures" in missing and "min on two quiet cores" in missing
+    assert "the long step is table3's BP_max" in missing and "reused" not in missing
+    (tmp_path / "store" / "cells").mkdir(parents=True)
+    (tmp_path / "store" / "cells" / "x.json").write_text("{}")
+    assert "are reused" in plan(tmp_path / "none", tmp_path / "store", [30])

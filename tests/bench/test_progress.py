@@ -130,3 +130,26 @@ def test_run_relayed_keeps_the_error_line_and_draws_bars_only_on_a_terminal(capf
         assert "child steps" in relayed.out and BAR.search(relayed.out), relayed.out
     else:                  # stderr piped (no bar), stdout the child's own
         assert "child steps" not in relayed.out + relayed.err and relayed.out.split()[2] == "False"    # stderr
+
+
+def test_a_heartbeat_says_how_far_a_loop_without_bar_is(capsys):
+    """Off a terminal (pytest's stderr) a slow loop still reports: what runs, how far, about how long is left."""
+    import time
+
+    from bench import progress
+
+    assert progress.how_far(2, 8, "frame", 40.0) == "2/8 frames done, 40 s, about 120 s left"
+    assert progress.how_far(0, None, "frame", 3.0) == "0/? frames done, 3 s"
+    beats = []
+    with progress.Heartbeat(lambda: beats.append(1) or "MM-2FSK d10: 1/2 frames done", every_s=0.05):
+        time.sleep(0.3)
+    assert len(beats) >= 2 and "... MM-2FSK d10: 1/2 frames done\n" in capsys.readouterr().err
+
+
+def test_before_its_first_step_a_loop_estimates_from_earlier_runs():
+    from bench import progress
+
+    assert progress.how_far(0, 8, "frame", 10.0, expected_s=5.0) == \
+        "0/8 frames done, 10 s, about 30 s left (earlier runs)"
+    assert progress.how_far(0, 8, "frame", 10.0) == "0/8 frames done, 10 s"
+    assert progress.how_far(4, 8, "frame", 10.0, expected_s=5.0) == "4/8 frames done, 10 s, about 10 s left"

@@ -138,7 +138,7 @@ def test_a_method_of_ones_own_runs_from_the_command_line_and_gets_its_label(synt
     rows = pd.read_csv(out / "results.csv")
     assert set(rows.method) == {"prior_only"} and set(rows.label) == {"Prior only"} and rows.valid_px.min() > 100
     from bench.report.tables import summarise
-    assert list(summarise(rows).row) == ["Prior only Δ10.0"]
+    assert list(summarise(rows).row) == ["Prior only (no radar)"]
     bad = _bench("dataset=maroon", f"dataset.root={synth_root}", "method=custom", "method._target_=nowhere.Mine",
                  "store.dir=null", f"hydra.run.dir={tmp_path / 'bad'}")
     assert bad.returncode == 2 and "Traceback" not in bad.stderr

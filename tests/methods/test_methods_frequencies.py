@@ -44,3 +44,19 @@ def test_nearest_present_frequency_is_used_and_collisions_are_refused():
     assert select_frequencies(freqs_hz, (81.45, 72.4)).tolist() == [0, 3]     # ascending, nearest
     with pytest.raises(ValueError, match="same frame frequency"):
         select_frequencies(freqs_hz, (81.45, 82.00))                        # both -> 82 GHz
+
+
+def test_a_target_outside_the_frames_band_is_refused_naming_the_frame():
+    from pathlib import Path
+
+    from methods.api import frequency_indices
+
+    freqs_hz = np.array([72.0, 75.0, 80.0, 82.0]) * 1e9
+    assert select_frequencies(freqs_hz, (83.0, 72.0)).tolist() == [0, 3]     # within half the largest step (2.5 GHz)
+    for targets in ((-82.0, 72.0), (90.0, 72.0), (72.0, 68.0)):             # negative or beyond the band
+        with pytest.raises(ValueError, match="lies outside the frame's band 72.000-82.000 GHz"):
+            select_frequencies(freqs_hz, targets)
+    with pytest.raises(ValueError, match=r"^/data/01_plate/30/radar/000000\.npy: two target frequencies"):
+        frequency_indices(freqs_hz, [81.45, 82.0], Path("/data/01_plate/30/radar/000000.npy"))
+    with pytest.raises(ValueError, match="^unknown frequency configuration"):   # a setting, not the frame's fault
+        frequency_indices(freqs_hz, "d3", Path("/data/01_plate/30/radar/000000.npy"))

@@ -10,6 +10,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from precision import parabola_depth_bound_m
 
 from bench.synth.memory import (
     ANTENNAS,
@@ -110,7 +111,7 @@ def test_roi_settings():
     with pytest.raises(ValueError, match="roi must be one of"):
         resolve("most")
     assert ALL.only("fsk_keep") == dataclasses.replace(NONE, fsk_keep=True)
-    # Warp devices: the dense kernels beat the host-driven searches for few frequencies (notes/gpu.md)
+    # Warp devices: the dense kernels beat the host-driven searches for few frequencies (docs/measurements/gpu.md)
     assert resolve("auto", "bp", 2, True) == SkipSettings(mask_bb=True) == default_for("2fsk", 2, True)
     assert default_for("bp", 128, True).bp_coarse_to_fine and default_for("2fsk", 2, False).fsk_keep
     assert SkipSettings().lattice_px(0.001) == (3, 5) and SkipSettings().lattice_px(0.006)[0] == 1   # no lattice
@@ -208,7 +209,13 @@ def test_point_targets_reconstruct_where_they_are_with_every_skip(scene):
         rec = reconstruct(scene, "bp", config, roi="all")
         none = reconstruct(scene, "bp", config, roi="none")
         same(np.isfinite(rec.depth_m), np.isfinite(none.depth_m))
-        np.testing.assert_allclose(rec.depth_m[rec.valid], none.depth_m[none.valid], atol=1e-7)
+        # the two paths sum the same phasors in another order (float32): bounded per pixel by the parabola's
+        # sensitivity (a fixed 1e-7 m was missed by 1.4e-7 m on one pixel of another machine); d10's bounds are
+        # ~1 um, d05's ~50 um (0.55 GHz apart, its depth profile is flat over a 1 mm step)
+        indices = config_indices(TABLE1_FREQS_HZ, config)
+        bound_m = parabola_depth_bound_m(scene.radar.signal[:, :, indices], TABLE1_FREQS_HZ[indices], GRID)[rec.valid]
+        assert np.all(np.abs(rec.depth_m[rec.valid] - none.depth_m[none.valid]) <= bound_m)
+        assert np.median(bound_m) < 0.1 * (GRID.z_m[1] - GRID.z_m[0])      # a shift by one depth step still fails
         row, col = np.unravel_index(np.nanargmax(rec.magnitude), GRID.image_shape)
         assert (GRID.x_m[col], GRID.y_m[::-1][row]) == pytest.approx((0.004, -0.006), abs=1.1e-3)
         assert rec.depth_m[row, col] == pytest.approx(0.300, abs=0.5e-3)

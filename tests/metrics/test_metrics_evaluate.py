@@ -126,3 +126,25 @@ def test_the_erosion_kernel_is_the_same_width_in_millimetres_on_every_grid():
         return (gt.silhouette.sum(axis=1).max() - gt.eroded_silhouette.sum(axis=1).max()) * pitch_mm
 
     assert width_mm(fine, 1.0) == pytest.approx(width_mm(coarse, 2.0), abs=2.0)   # 4 mm either way, +- a pixel
+
+
+def test_coverage_is_the_share_of_the_silhouette_the_points_cover(plate_gt):
+    depth = plate_gt.depth_m.copy()
+    rows, cols = np.nonzero(np.isfinite(depth))
+    depth[:, cols.min() + 51:] = np.nan                                   # the right 50 of 101 columns missing
+    result = evaluate(depth, plate_gt)
+    assert result["silhouette_px"] == 101 * 101
+    assert result["coverage_pct"] == pytest.approx(100 * 51 / 101)
+    assert evaluate(plate_gt.depth_m, plate_gt)["coverage_pct"] == pytest.approx(100.0)
+    assert evaluate(plate_gt.depth_m + 0.45, plate_gt)["coverage_pct"] == 0.0   # all of it beyond mask_bb
+
+
+def test_off_share_counts_the_points_outside_mask_bb_too(plate_gt):
+    depth = plate_gt.depth_m.copy()
+    rows, cols = np.nonzero(np.isfinite(depth))
+    block = (slice(rows.max() + 11, rows.max() + 21), slice(cols.min(), cols.min() + 10))   # 1 cm below the plate
+    depth[block] = 0.75                                                   # and beyond mask_bb zmax = 0.70
+    result = evaluate(depth, plate_gt)
+    assert result["outside_bb_px"] == 100 and result["off_px"] == 0
+    assert result["off_pct"] == pytest.approx(100 * 100 / (101 * 101 + 100))
+    assert evaluate(plate_gt.depth_m + 0.45, plate_gt)["off_pct"] == 100.0       # every point outside mask_bb

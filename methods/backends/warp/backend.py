@@ -6,7 +6,7 @@ import numpy as np
 import warp as wp
 
 from methods.backends.base import Backend, check_inputs, grid_vectors
-from methods.backends.warp import correlation, fsk, prior
+from methods.backends.warp import columns, correlation, fsk, prior, search
 from methods.backends.warp.frame_graph import frame_graph, fsk_graph
 from methods.backends.warp.frames import BufferPool, FrameCache
 from methods.backends.warp.prior import DeferredPrior
@@ -37,13 +37,20 @@ class WarpBackend(Backend):
         self.default_kernel = "separable" if self.device.is_cpu else "tc"
         self.rasterises_prior = not self.device.is_cpu
         self.warmed: set = set()
+        #: BP's coarse-to-fine search with many frequencies runs on the device (`search`); False: host-driven.
+        #: On by default where it pays: CUDA (H100 BP_max frame 190 vs 380 ms); on Warp-CPU the frame's range
+        #: profiles over the whole search hull, one thread, cost more than the host search saves (22 vs 13 s)
+        self.device_search = not self.device.is_cpu
+        self.search_profiles = search.FrameProfiles()
+        #: per-term interpolation bound of the "columns" volume kernel (its accuracy knob: the rho step follows)
+        self.column_term_tol = columns.TERM_TOL
 
     def make_launch(self, signal, freqs_hz, tx_m, rx_m, *, kernel: str | None = None, points_m=None, grid_m=None,
                     sum_freqs: bool = False, reuse: bool = False):
         """`correlation.make_launch` on this device (the benchmarks time the function it returns)."""
         return correlation.make_launch(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m,
                                        kernel=kernel or self.default_kernel, points_m=points_m, grid_m=grid_m,
-                                       sum_freqs=sum_freqs, reuse=reuse)
+                                       sum_freqs=sum_freqs, reuse=reuse, term_tol=self.column_term_tol)
 
     def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel: str | None = None) -> np.ndarray:
         """complex64 (F, N); `kernel` "tc", "separable" or "direct" (None: the device's default)."""
@@ -71,6 +78,33 @@ class WarpBackend(Backend):
             return correlation.to_complex(launch())[0]
         return run
 
+    def search_depth(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, plan, threshold_db, z_edges_are_grid_edges,
+                     hull_m=None):
+        """On the device end to end with many equidistant frequencies (range-compressed values, as
+        `summed_at_points` gives them); None (the host-driven search) otherwise or when `device_search` is off."""
+        inputs = self._search_inputs(signal, freqs_hz, tx_m, rx_m, z_m)
+        if inputs is None:
+            return None
+        return search.search_depth(inputs, self.buffers, self.search_profiles, np.asarray(x_m, dtype=np.float64),
+                                   np.asarray(y_m, dtype=np.float64), np.asarray(z_m, dtype=np.float64), plan,
+                                   threshold_db, z_edges_are_grid_edges, _hull(x_m, y_m, z_m, hull_m))
+
+    def coarse_peaks(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, step, hull_m=None):
+        """As `search_depth`, for the coarse ROI's pass: (coarse maximum, its first depth index, samples) or None."""
+        inputs = self._search_inputs(signal, freqs_hz, tx_m, rx_m, z_m)
+        if inputs is None:
+            return None
+        return search.coarse_peaks(inputs, self.buffers, self.search_profiles, np.asarray(x_m, dtype=np.float64),
+                                   np.asarray(y_m, dtype=np.float64), np.asarray(z_m, dtype=np.float64), step,
+                                   _hull(x_m, y_m, z_m, hull_m))
+
+    def _search_inputs(self, signal, freqs_hz, tx_m, rx_m, z_m):
+        """The frame's inputs where the device search applies (many equidistant frequencies, `device_search`)."""
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        if not self.device_search or self._volume_kernel(freqs_hz, "auto") != "range" or len(z_m) < 2:
+            return None
+        return self.frames.inputs(signal, freqs_hz, tx_m, rx_m)
+
     def _points(self, signal, freqs_hz, tx_m, rx_m, points_m, kernel, sum_freqs):
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
@@ -79,11 +113,11 @@ class WarpBackend(Backend):
         return correlation.to_complex(run())
 
     def _volume_kernel(self, freqs_hz, method: str) -> str:
-        if method not in ("auto", "direct", "range"):
-            raise ValueError(f"method must be 'auto', 'direct' or 'range', got {method!r}")
+        if method not in ("auto", "direct", "range", "columns"):
+            raise ValueError(f"method must be 'auto', 'direct', 'range' or 'columns', got {method!r}")
         if method == "auto":
             method = "range" if range_compression.worth_it(freqs_hz) else "direct"
-        return "range" if method == "range" else self.default_kernel
+        return method if method in ("range", "columns") else self.default_kernel
 
     def volume(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, method: str = "auto", kernel: str | None = None
                ) -> np.ndarray:
@@ -94,11 +128,14 @@ class WarpBackend(Backend):
         run = self.make_launch(signal, freqs_hz, tx_m, rx_m, kernel=kernel, grid_m=(x_m, y_m, z_m), reuse=True)
         return correlation.to_complex(run())[0].reshape(len(z_m), len(y_m), len(x_m))
 
-    def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None):
+    def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None,
+                    method: str = "auto"):
+        """As `Backend.volume_peak`; `method` as in `volume` ("columns": the accurate column-separable sum)."""
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         x_m, y_m, z_m = grid_vectors(x_m, y_m, z_m)
         return correlation.volume_peak(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m,
-                                       kernel=self._volume_kernel(freqs_hz, "auto"), timer=timer)
+                                       kernel=self._volume_kernel(freqs_hz, method), timer=timer,
+                                       term_tol=self.column_term_tol)
 
     def realsense_prior(self, depth, realsense2radar, grid, keep_on_device: bool = False,
                         fill: str = DEFAULT_FILL) -> Prior:
@@ -138,6 +175,20 @@ class WarpBackend(Backend):
         def correlate_points(points):
             return self.make_launch(signal, freqs_hz, tx_m, rx_m, points_m=points, reuse=True)()
         return fsk.depth_at_prior(self.buffers, correlate_points, signal, freqs_hz, grid, prior, keep_ratio, timer)
+
+    def mm3fsk_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid, prior, coarse, threshold_db, timer,
+                        roi_pixels=None):
+        """MM-3FSK's frame graph (prior, both correlations, median offset, depth, filter: one launch) for a RealSense
+        prior not built yet; None (the host path) for any other prior."""
+        if not (isinstance(prior, DeferredPrior) and prior.pending):
+            return None
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        with timer.stage("correlate"):
+            graph = frame_graph(self.buffers, prior.depth, prior.realsense2radar, grid, prior.max_jump_mm, freqs_hz,
+                                tx_m, rx_m, self._keep_ratio(threshold_db), coarse)
+            depth_m, magnitude, prior_m, n_covered, n_used = graph.run(prior.depth, signal, roi_pixels)
+        prior.resolve(prior_m, n_covered, n_used)
+        return (depth_m, magnitude, prior_m), graph.offset_m
 
     def _point_correlator(self, signal, freqs_hz, tx_m, rx_m):
         """Function device points (n,) vec3d -> device phasors (F, n) of this frame (inputs looked up once)."""
@@ -193,3 +244,12 @@ class WarpBackend(Backend):
             for module in (prior_kernels, fsk_kernels):
                 wp.load_module(module=module.__name__, device=self.device)
         self.warmed.add(key)
+
+
+def _hull(x_m, y_m, z_m, hull_m) -> np.ndarray:
+    """Points whose box the search's range profiles cover: `hull_m` (K, 3) where given (one build per frame for the
+    coarse ROI and the search), else the corners of the searched points."""
+    if hull_m is not None:
+        return np.asarray(hull_m, dtype=np.float64).reshape(-1, 3)
+    return np.array([[x, y, z] for x in (np.min(x_m), np.max(x_m)) for y in (np.min(y_m), np.max(y_m))
+                     for z in (np.min(z_m), np.max(z_m))])

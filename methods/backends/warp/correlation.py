@@ -8,11 +8,12 @@ from contextlib import nullcontext
 import numpy as np
 import warp as wp
 
+from methods.backends.warp import columns
 from methods.backends.warp import correlation_kernels as kernels
 from methods.backends.warp.frames import C_M_PER_S, BufferPool, FrameCache, FrameInputs
 from methods.ops import range_compression
 
-KERNELS = ("tc", "separable", "direct", "range")
+KERNELS = ("tc", "separable", "direct", "range", "columns")
 
 
 def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
@@ -22,9 +23,10 @@ def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
     return range_compression.path_bounds_m(tx_m, rx_m, lo_m, hi_m)
 
 
-def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box_m):
-    """Upload the DFT tables once; return a function that builds the range profiles over the paths the box
-    `box_m` = (x_m, y_m, z_m) can reach and gathers every voxel (flag 1) or point (flag 0)."""
+def range_profiles(inputs: FrameInputs, freqs_hz, box_m):
+    """(function that builds the frame's range profiles over the paths the box `box_m` = (x_m, y_m, z_m) can reach,
+    the gather's arguments after the points: rx, tx, k_c, carrier cycles per metre, samples per metre, m0,
+    profiles). The DFT tables are uploaded once per frame."""
     rplan = range_compression.plan(freqs_hz)
     if rplan is None:
         raise ValueError("range compression needs >= 2 distinct frequencies on an equidistant grid "
@@ -35,26 +37,38 @@ def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box
     sig, twiddle, shift, index = inputs.range_tables(rplan)
     profiles = wp.empty((n_rx * n_tx_pad, n_window), dtype=wp.vec2h, device=dev)
     k_c = 2 * np.pi * rplan.f_carrier_hz / C_M_PER_S
-    gather_args = [flag, points, x, y, z, inputs.rx, inputs.tx_padded, wp.float32(k_c),
-                   wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S), wp.float32(rplan.samples_per_m),
-                   wp.float32(m0), profiles, out]
+    gather_args = [inputs.rx, inputs.tx_padded, wp.float32(k_c), wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S),
+                   wp.float32(rplan.samples_per_m), wp.float32(m0), profiles]
 
-    def run():
+    def build():
         wp.launch(kernels.range_profiles, dim=(n_rx * n_tx_pad, n_window),
                   inputs=[sig, index, twiddle, shift, int(m0) % rplan.n_samples, profiles], device=dev)
-        wp.launch(kernels.range_gather, dim=out.shape[1], inputs=gather_args, block_dim=256, device=dev)
+    return build, gather_args
+
+
+def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box_m):
+    """Return a function that builds the range profiles over the paths the box `box_m` can reach
+    (`range_profiles`) and gathers every voxel (flag 1) or point (flag 0)."""
+    build, gather_args = range_profiles(inputs, freqs_hz, box_m)
+    args = [flag, points, x, y, z] + gather_args + [out]
+
+    def run():
+        build()
+        wp.launch(kernels.range_gather, dim=out.shape[1], inputs=args, block_dim=256, device=inputs.device)
         return out
     return run
 
 
 def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m, rx_m, *, kernel: str,
                 points_m=None, grid_m=None, sum_freqs: bool = False, reuse: bool = False,
-                inputs: FrameInputs | None = None):
+                inputs: FrameInputs | None = None, term_tol: float = columns.TERM_TOL):
     """Upload inputs once; return a function that runs `kernel` and returns the device output (rows, N) vec2f.
 
-    kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct" or "range" (frequency sum only; the
+    kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct", "range" (frequency sum only; the
     range profiles are rebuilt on every call, as a new frame needs, over the paths the grid's or the points' box
-    can reach). Points come from `points_m` (N, 3) or from
+    can reach) or "columns" (grids only: the column-separable sum of `columns` with the rho step of `term_tol`,
+    tables rebuilt on every call).
+    Points come from `points_m` (N, 3) or from
     `grid_m` = (x_m, y_m, z_m); with a grid the output is summed over frequencies, flat in (z, y, x) order.
     Frame inputs are cached by content; with `reuse` the output and work buffers are pre-allocated ones shared
     between calls (the API copies the output back before returning). The benchmark times the returned function.
@@ -79,6 +93,14 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
     n_out = points_m.shape[0] if grid_m is None else x.shape[0] * y.shape[0] * z.shape[0]
     out_shape = (1 if sum_freqs else inputs.n_freqs, n_out)
     out = buffers.get("out", out_shape, wp.vec2f) if reuse else wp.empty(out_shape, dtype=wp.vec2f, device=dev)
+    if kernel == "columns":
+        if grid_m is None:
+            raise ValueError("the columns kernel computes volumes: pass grid_m")
+        rplan = columns.cached_plan(inputs.tx_m, inputs.freqs_hz, *grid_m, term_tol)
+        if rplan is None:
+            raise ValueError("the columns kernel needs transmitters on at most "
+                             f"{columns.kernels.MAX_COLUMNS} columns of >= {columns.MIN_TABLE_COLUMN} elements")
+        return columns.make_volume_launch(inputs, buffers, rplan, *grid_m, out)
     if kernel == "range":
         if not sum_freqs:
             raise ValueError("the range kernel gives the frequency sum only (sum_freqs=True)")
@@ -122,14 +144,15 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
 
 
 def volume_peak(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float,
-                *, kernel: str, timer=None) -> tuple[np.ndarray, np.ndarray]:
+                *, kernel: str, timer=None,
+                term_tol: float = columns.TERM_TOL) -> tuple[np.ndarray, np.ndarray]:
     """BP depth extraction on the device: the volume (as `make_launch` on the grid) stays there,
     `volume_peak_depth` reduces it over z, and only (depth, max projection), each float64 (ny, nx), come back.
     `timer` (a StageTimer) gets the stages "correlate" and "depth" (synchronised)."""
     stage = timer.stage if timer is not None else (lambda name: nullcontext())
     with stage("correlate"):
         run = make_launch(frames, buffers, signal, freqs_hz, tx_m, rx_m, kernel=kernel, grid_m=(x_m, y_m, z_m),
-                          reuse=True)
+                          reuse=True, term_tol=term_tol)
         vol = run()
         dev = vol.device
         wp.synchronize_device(dev)

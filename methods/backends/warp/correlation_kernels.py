@@ -12,7 +12,7 @@ One thread per point or voxel; points come from an (N, 3) array or from an x/y/z
 * `range_profiles` + `range_gather`: range-compressed back-projection (methods/ops/range_compression.py): profiles in
   fp16 over the path window the volume needs only (fits L2), Tx steering in registers in chunks of 16.
 * `volume_peak_depth`: BP's argmax + parabola over z of a (z, pixel) volume on the device.
-The measured alternatives of each kernel (versions, layouts, chunk sizes) are in notes/gpu.md.
+The measured alternatives of each kernel (versions, layouts, chunk sizes) are in docs/measurements/gpu.md.
 Phases use the same cancellation-free split as the numpy backend: |p - q| = |p| + e(p, q) with e in float32 and the
 common phase 2 k |p| in float64, reduced mod 2 pi.
 """
@@ -310,48 +310,65 @@ def range_profiles(signal: wp.array2d(dtype=wp.vec2f), grid_index: wp.array(dtyp
     profiles[pair, j] = wp.vec2h(cmul(shift[m], acc))
 
 
+@wp.func
+def range_partial(p64: wp.vec3d, lane: int, stride: int, rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f),
+                  k_carrier: wp.float32, samples_per_m: wp.float32, m0: wp.float32,
+                  profiles: wp.array2d(dtype=wp.vec2h)) -> wp.vec2f:
+    """Range-compressed value at point p64 without its common phasor, over this lane's share of the (Tx chunk,
+    receiver) units: sum over pairs of carrier phasor times the linearly interpolated range profile. Tx (padded to a
+    multiple of TX_CHUNK, zero profiles in the pads) in chunks of RANGE_CHUNK whose sample offsets and carrier
+    phasors stay in registers; units chunk-major, lane l of `stride` takes a contiguous run of them (a lane of a
+    32-thread block computes the steering of one or two chunks, not all); the profile window starts at sample m0."""
+    norm64 = wp.length(p64)
+    p = wp.vec3f(p64)
+    norm = wp.float32(norm64)
+    n_tx = tx.shape[0]
+    n_rx = rx.shape[0]
+    u_max = wp.float32(profiles.shape[1]) - 1.001
+    n_units = (n_tx // RANGE_CHUNK) * n_rx
+    per_lane = (n_units + stride - 1) // stride
+    acc = wp.vec2f(0.0, 0.0)
+    u_tx = vec_range()
+    b_re = vec_range()
+    b_im = vec_range()
+    chunk = int(-1)  # noqa: UP018 (Warp: a dynamic variable, not a constant)
+    for unit in range(lane * per_lane, wp.min((lane + 1) * per_lane, n_units)):
+        t0 = (unit // n_rx) * RANGE_CHUNK
+        r = unit % n_rx
+        if unit // n_rx != chunk:
+            chunk = unit // n_rx
+            for j in range(RANGE_CHUNK):
+                e = path_excess_m(p, norm, tx[t0 + j])
+                u_tx[j] = e * samples_per_m
+                b_re[j] = wp.cos(k_carrier * e)
+                b_im[j] = wp.sin(k_carrier * e)
+        e_rx = path_excess_m(p, norm, rx[r])
+        base = (2.0 * norm + e_rx) * samples_per_m - m0
+        row = r * n_tx + t0
+        gb = wp.vec2f(0.0, 0.0)
+        for j in range(RANGE_CHUNK):
+            u = wp.clamp(base + u_tx[j], 0.0, u_max)
+            iu = wp.int32(u)
+            w = u - wp.float32(iu)
+            g = lerp_profile(profiles, row + j, iu, w)
+            gb += cmul(g, wp.vec2f(b_re[j], b_im[j]))
+        phase = k_carrier * e_rx
+        acc += cmul(wp.vec2f(wp.cos(phase), wp.sin(phase)), gb)
+    return acc
+
+
 @wp.kernel(module="unique", module_options={"enable_backward": False, "max_unroll": 32})
 def range_gather(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.float64),
                  y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
                  rx: wp.array(dtype=wp.vec3f), tx: wp.array(dtype=wp.vec3f), k_carrier: wp.float32,
                  carrier_cycles_per_m: wp.float64, samples_per_m: wp.float32, m0: wp.float32,
                  profiles: wp.array2d(dtype=wp.vec2h), out: wp.array2d(dtype=wp.vec2f)):
-    """Value at voxel or point i (`point_at`: flat voxel i of the grid x, y, z, or points[i]): sum over pairs of
-    carrier phasor times the linearly interpolated range profile. Tx (padded to a multiple of TX_CHUNK, zero
-    profiles in the pads) in chunks of RANGE_CHUNK whose sample offsets and carrier phasors stay in registers; the
-    profile window starts at sample m0 (path lengths the volume or the points' box can reach)."""
+    """Range-compressed value of voxel or point i (`point_at`: flat voxel i of the grid x, y, z, or points[i]):
+    `range_partial` over every receiver times the common phasor exp(j k_c 2 |p|) (float64 reduced)."""
     i = wp.tid()
     p64 = point_at(i, grid, points, x, y, z)
-    norm64 = wp.length(p64)
-    p = wp.vec3f(p64)
-    norm = wp.float32(norm64)
-    n_tx = tx.shape[0]
-    u_max = wp.float32(profiles.shape[1]) - 1.001
-    acc = wp.vec2f(0.0, 0.0)
-    for chunk_i in range(n_tx // RANGE_CHUNK):
-        t0 = chunk_i * RANGE_CHUNK
-        u_tx = vec_range()
-        b_re = vec_range()
-        b_im = vec_range()
-        for j in range(RANGE_CHUNK):
-            e = path_excess_m(p, norm, tx[t0 + j])
-            u_tx[j] = e * samples_per_m
-            b_re[j] = wp.cos(k_carrier * e)
-            b_im[j] = wp.sin(k_carrier * e)
-        for r in range(rx.shape[0]):
-            e_rx = path_excess_m(p, norm, rx[r])
-            base = (2.0 * norm + e_rx) * samples_per_m - m0
-            row = r * n_tx + t0
-            gb = wp.vec2f(0.0, 0.0)
-            for j in range(RANGE_CHUNK):
-                u = wp.clamp(base + u_tx[j], 0.0, u_max)
-                iu = wp.int32(u)
-                w = u - wp.float32(iu)
-                g = lerp_profile(profiles, row + j, iu, w)
-                gb += cmul(g, wp.vec2f(b_re[j], b_im[j]))
-            phase = k_carrier * e_rx
-            acc += cmul(wp.vec2f(wp.cos(phase), wp.sin(phase)), gb)
-    out[0, i] = cmul(acc, phasor_of_cycles(norm64 * carrier_cycles_per_m))
+    acc = range_partial(p64, 0, 1, rx, tx, k_carrier, samples_per_m, m0, profiles)
+    out[0, i] = cmul(acc, phasor_of_cycles(wp.length(p64) * carrier_cycles_per_m))
 
 
 @wp.kernel(enable_backward=False)

@@ -6,6 +6,7 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 
 import bench.harness.app as app
+from bench.harness import captures
 
 
 def _cfg(synth_root, *overrides):
@@ -17,9 +18,10 @@ def _cfg(synth_root, *overrides):
 
 def test_ground_truth_is_built_once_per_capture_for_every_cell(synth_root, tmp_path, monkeypatch):
     calls = []
-    real = app.ground_truth
-    monkeypatch.setattr(app, "ground_truth", lambda capture, grid: calls.append(capture.name) or real(capture, grid))
-    monkeypatch.setattr(app, "_GROUND_TRUTHS", type(app._GROUND_TRUTHS)())  # none cached yet
+    real = captures.ground_truth_rasters_m
+    monkeypatch.setattr(captures, "ground_truth_rasters_m",
+                        lambda capture, grid: calls.append(capture.name) or real(capture, grid))
+    monkeypatch.setattr(captures, "_GROUND_TRUTHS", type(captures._GROUND_TRUTHS)())  # none cached yet
     rows = [app.run(_cfg(synth_root, *cell), tmp_path / str(i))[0]
             for i, cell in enumerate([["cell=mm2fsk_d10"], ["cell=2fsk_d05"], ["cell=bp_d05", "grid=bp_cpu"]])]
     assert len(calls) == 1

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.harness.results import ResultsCsv, write_results
+from bench.harness.results import MEASURED_COLUMNS, ResultsCsv, write_results
 
 FRAMES = 10
 
@@ -121,9 +121,9 @@ def test_runs_with_and_without_the_store_write_the_same_files(synth_root, tmp_pa
     stored, cached = run("stored", tmp_path / "store"), run("cached", tmp_path / "store")
     for other in (stored, cached):
         pd.testing.assert_frame_equal(other[0].drop(columns=[c for c in other[0] if c.startswith("t_")]
-                                                    + ["runtime_ms"]),
+                                                    + MEASURED_COLUMNS),
                                       plain[0].drop(columns=[c for c in plain[0] if c.startswith("t_")]
-                                                    + ["runtime_ms"]))
+                                                    + MEASURED_COLUMNS))
         assert other[1].keys() == plain[1].keys() and other[2] == plain[2] and other[3] == plain[3]
         for name, (values, dtype, compression) in plain[1].items():
             np.testing.assert_array_equal(other[1][name][0], values)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -16,6 +17,40 @@ from bench import cli
 from bench.harness import slurm
 
 REPO = Path(__file__).resolve().parents[3]
+
+
+@pytest.mark.skipif(os.environ.get("BENCH_SLURM_TRY") == "1", reason="the opt-in real-cluster run keeps SLURM")
+def test_the_suite_runs_without_slurms_commands():
+    """tests/conftest.py takes them off PATH for the whole session (subprocesses inherit it): a test must fake what
+    it touches."""
+    from no_slurm import SLURM_COMMANDS
+
+    assert [command for command in SLURM_COMMANDS if shutil.which(command)] == []
+
+
+def test_path_without_slurm_shadows_only_the_slurm_commands(tmp_path):
+    from no_slurm import path_without_slurm
+
+    installed = tmp_path / "usr_bin"
+    installed.mkdir()
+    for name in ("srun", "sbatch", "python-like-tool"):
+        (installed / name).write_text("#!/bin/sh\nexit 0\n")
+        (installed / name).chmod(0o755)
+    path = path_without_slurm(f"{installed}{os.pathsep}/nonexistent", tmp_path / "shadow")
+    assert shutil.which("srun", path=path) is None and shutil.which("sbatch", path=path) is None
+    assert Path(shutil.which("python-like-tool", path=path)).resolve() == installed / "python-like-tool"
+    assert path.split(os.pathsep)[1] == "/nonexistent"                  # folders without SLURM stay as they are
+
+
+def test_the_slurm_launcher_without_slurm_is_one_line_before_any_work(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "bench", "-m", "hydra/launcher=slurm_cpu", "cell=mm2fsk_d10",
+                           "dataset=maroon", f"dataset.root={tmp_path / 'data'}",
+                           f"hydra.sweep.dir={tmp_path / 'sweep'}", f"store.dir={tmp_path / 'store'}"],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert proc.stderr.startswith("error: hydra/launcher=slurm_cpu: SLURM's sbatch, srun, squeue, scancel not found on "
+                                  "PATH") and "hydra/launcher=local" in proc.stderr
+    assert not (tmp_path / "data").exists() and not (tmp_path / "store").exists()   # nothing generated or stored
 
 
 def _cell(method: str, f_ghz, grid: str = "from_capture", device: str = "cpu"):
@@ -197,3 +232,23 @@ def test_the_slurm_path_on_a_single_node_cluster(accounting):
                        timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.count("ok: ") == 18, proc.stdout
+
+
+def test_a_jobs_absurd_setting_is_one_line_before_anything_is_submitted(tmp_path):
+    """Each job's configuration is checked (bench.harness.validate) before sbatch sees it; fakes of every SLURM
+    command the launcher touches, sbatch's leaving a mark if it is called."""
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "sbatch").write_text(f'#!/bin/sh\ntouch {tmp_path / "sbatch-called"}\necho "Submitted batch job 7"\n')
+    (fake / "sinfo").write_text("#!/bin/sh\necho 16\n")
+    for name in ("srun", "squeue", "scancel"):
+        (fake / name).write_text("#!/bin/sh\nexit 0\n")
+    for tool in fake.iterdir():
+        tool.chmod(0o755)
+    env = {**os.environ, "PATH": f"{fake}:{os.environ['PATH']}", "BENCH_SLURM_LOCAL_PATHS": "1"}
+    proc = subprocess.run([sys.executable, "-m", "bench", "-m", "hydra/launcher=slurm_cpu", "cell=mm2fsk_d10",
+                           "threshold_db=14,-3", "dataset=maroon", f"dataset.root={tmp_path}",
+                           f"hydra.sweep.dir={tmp_path / 'sweep'}", f"store.dir={tmp_path / 'store'}"],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
+    assert proc.returncode == 2 and proc.stderr == "error: threshold_db=-3: must be a number >= 0 and <= 1529.23\n"
+    assert not (tmp_path / "sbatch-called").exists()

@@ -10,7 +10,7 @@ import time
 import pytest
 from hydra import compose, initialize_config_dir
 
-from bench.harness import app, slurm_resources
+from bench.harness import captures, slurm_resources
 from bench.harness.app import CONFIG_DIR
 from bench.harness.slurm_resources import job_mem_gb, job_peak_mib
 from bench.perf.memory import job_peak_mib_measured
@@ -22,7 +22,7 @@ def _cfg(*overrides: str):
 
 
 def test_frames_held_bound_is_the_apps():
-    assert slurm_resources.CAPTURES_KEPT == app.CAPTURES_KEPT == app.GROUND_TRUTHS_KEPT
+    assert slurm_resources.CAPTURES_KEPT == captures.CAPTURES_KEPT == captures.GROUND_TRUTHS_KEPT
 
 
 @pytest.mark.parametrize("cell", [["cell=mm2fsk_d10"], ["cell=bp_d05", "grid=bp_cpu"]], ids=["mm2fsk", "bp_small"])
@@ -55,11 +55,15 @@ def test_mem_gb_setting():
 
 def test_launcher_asks_sbatch_for_the_cells_memory(synth_root, tmp_path):
     """The SLURM preset end to end up to sbatch (a stand-in that only answers with a job id): each job's submission
-    script asks for its cell's memory, 2 GB more with a GPU."""
+    script asks for its cell's memory, 2 GB more with a GPU. Every SLURM command the launcher touches is a fake
+    (the session's PATH has none: tests/conftest.py)."""
     fake = tmp_path / "bin"
     fake.mkdir()
     (fake / "sbatch").write_text('#!/bin/sh\necho "Submitted batch job $$"\n')
     (fake / "squeue").write_text("#!/bin/sh\necho 1\n")          # jobs stay listed: the launcher waits for them
+    (fake / "sinfo").write_text("#!/bin/sh\necho 16\n")         # CPUs of a node: cpus_per_task is not clipped
+    for name in ("srun", "scancel"):                             # looked for before submitting; never run here
+        (fake / name).write_text("#!/bin/sh\nexit 0\n")
     for tool in fake.iterdir():
         tool.chmod(0o755)
     env = {**os.environ, "PATH": f"{fake}:{os.environ['PATH']}", "BENCH_SLURM_LOCAL_PATHS": "1"}

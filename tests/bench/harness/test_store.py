@@ -8,16 +8,21 @@ import pandas as pd
 from hydra import compose, initialize_config_dir
 
 from bench.harness.app import CONFIG_DIR, run
+from bench.harness.results import MEASURED_COLUMNS
 from bench.harness.store import Store, capture_files, code_version
+
+ROW = {"key": "abc", "object": "01_plate", "distance": 30, "frame": 0, "method": "bp", "valid_px": 12,
+       "runtime_ms": 1.5, "timing": "alone", "P_cm": 0.25}
+GRID_ATTRS = {"bb_min_m": [-0.1, -0.1, 0.2], "bb_max_m": [0.1, 0.1, 0.4], "grid_size": [4, 3, 1]}
 
 
 def test_put_get_round_trip_and_no_partial_cell(tmp_path):
     store = Store(tmp_path)
     arrays = {"depth_m": np.full((3, 4), 0.3), "magnitude": np.ones((3, 4)), "gt_depth_m": np.full((3, 4), np.nan)}
     assert store.get("abc") is None
-    store.put("abc", {"P_cm": 0.25}, arrays, {"grid_size": [4, 3, 1]})
+    store.put("abc", ROW, arrays, GRID_ATTRS)
     row, back, attrs = store.get("abc")
-    assert row == {"P_cm": 0.25} and list(attrs["grid_size"]) == [4, 3, 1]
+    assert row == ROW and list(attrs["grid_size"]) == [4, 3, 1]
     assert (back["depth_m"] == 0.3).all()
     assert np.isnan(back["gt_depth_m"]).all()
     assert sorted(p.name for p in (tmp_path / "cells").iterdir()) == ["abc.h5", "abc.json"]   # no temp files left
@@ -61,10 +66,10 @@ def test_rerun_reads_finished_cells_from_the_store(synth_root, tmp_path):
         third = pd.DataFrame(run(compose(config_name="config", overrides=[*overrides, "freq=d8"]), tmp_path / "c"))
     assert not first.cached.any() and not third.cached.any()
     assert second.set_index("object").cached.to_dict() == {"01_plate": True, "03_sphere": False}
-    pd.testing.assert_frame_equal(first.drop(columns=["cached", "runtime_ms"] + [c for c in first
-                                                                                 if c.startswith("t_")]),
-                                  second.drop(columns=["cached", "runtime_ms"] + [c for c in first
-                                                                                  if c.startswith("t_")]),
+    pd.testing.assert_frame_equal(first.drop(columns=["cached", *MEASURED_COLUMNS] + [c for c in first
+                                                                                      if c.startswith("t_")]),
+                                  second.drop(columns=["cached", *MEASURED_COLUMNS] + [c for c in first
+                                                                                       if c.startswith("t_")]),
                                   check_like=True)
     assert (tmp_path / "b" / "depth" / "01_plate_30_000000.png").read_bytes() == \
         (tmp_path / "a" / "depth" / "01_plate_30_000000.png").read_bytes()

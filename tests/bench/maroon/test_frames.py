@@ -134,8 +134,8 @@ def test_tables_average_each_captures_frames_first():
         caption("table3", rows.assign(device="cpu"))
     summary = summarise(rows)
     line = summary.iloc[0]
-    assert line.captures == 2 and line.ok == 2 and line.comparable
+    assert line.captures == 2 and line.ok == 2 and line.failed == 0
     assert line.P_cm == pytest.approx(2.0)                  # (1 + 3) / 2, not (4 x 1 + 3) / 5
     assert line.runtime_ms == pytest.approx((25.0 + 10.0) / 2)
     failed = summarise(_frame_rows({"01_plate": [1.0, 1.0], "03_sphere": [3.0]}, failed={("01_plate", 1)})).iloc[0]
-    assert failed.ok == 1 and not failed.comparable and failed.P_cm == pytest.approx(3.0)
+    assert failed.ok == 1 and failed.failed == 1 and failed.P_cm == pytest.approx(3.0)

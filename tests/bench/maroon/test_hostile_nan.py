@@ -134,7 +134,9 @@ ROWS = {         # case: (edit, method, prior, what the failure column must say:
                               "mm2fsk", "realsense", "covers no radar pixel"),
     "mesh_5_m_to_the_side": (_json("alignment.json", lambda d: d["photogrammetry2radar"][0].__setitem__(3, 5.0)),
                              "mm2fsk", "realsense", "no point to compare"),
-    "all_zero_frame": (_frame(lambda f: f.update(xr=np.zeros_like(f["xr"]))), "2fsk", "none", "without signal"),
+    "all_zero_frame": (_frame(lambda f: f.update(xr=np.zeros_like(f["xr"]))), "2fsk", "none", "has no signal"),
+    "mask_bb_beside_the_grid": (_json("metadata.json", lambda d: d.__setitem__("mask_bb", {"xmin": 5.0, "xmax": 6.0})),
+                                "2fsk", "none", "metadata.json (xmax 6, xmin 5 m) excludes every pixel of the grid"),
 }
 
 

@@ -5,11 +5,11 @@ from bench.perf.overhead import STAGES, measure
 
 
 def test_later_cells_reuse_the_read_captures_and_ground_truth(synth_root, tmp_path, monkeypatch):
-    from bench.harness import app
+    from bench.harness import captures
 
     # empty process caches: other tests of this process may have read the capture already
-    monkeypatch.setattr(app, "_CAPTURES", type(app._CAPTURES)())
-    monkeypatch.setattr(app, "_GROUND_TRUTHS", type(app._GROUND_TRUTHS)())
+    monkeypatch.setattr(captures, "_CAPTURES", type(captures._CAPTURES)())
+    monkeypatch.setattr(captures, "_GROUND_TRUTHS", type(captures._GROUND_TRUTHS)())
     rows = measure(synth_root, ["mm2fsk_d10", "mm2fsk_d05"], ["01_plate/30"], "cpu", None, use_store=True,
                    work=tmp_path)
     first, second, total = rows
@@ -26,17 +26,17 @@ def test_a_capture_part_is_read_once_per_process(synth_root, monkeypatch):
     """BP's cell reads radar and mesh, MM-2FSK's then only the RealSense frame (paired like read_capture pairs)."""
     import numpy as np
 
-    from bench.harness import app
+    from bench.harness import captures
     from bench.maroon import reader
 
     asked = []
     read = reader.read_capture
     monkeypatch.setattr(reader, "read_capture", lambda *a, **k: asked.append(k["parts"]) or read(*a, **k))
-    monkeypatch.setattr(app, "_CAPTURES", type(app._CAPTURES)())
+    monkeypatch.setattr(captures, "_CAPTURES", type(captures._CAPTURES)())
     capture_dir = synth_root / "01_plate" / "30"
-    first = app._read_capture(capture_dir, -1, ("radar", "mesh"), False, (None, None))
-    both = app._read_capture(capture_dir, -1, ("radar", "mesh", "realsense"), False, (None, None))
-    again = app._read_capture(capture_dir, -1, ("radar", "mesh"), False, (None, None))
+    first = captures.read(capture_dir, -1, ("radar", "mesh"), False, (None, None))
+    both = captures.read(capture_dir, -1, ("radar", "mesh", "realsense"), False, (None, None))
+    again = captures.read(capture_dir, -1, ("radar", "mesh"), False, (None, None))
     assert asked == [("radar", "mesh"), ("realsense",)]
     assert first.realsense is None and again.realsense is None and both.radar is first.radar
     direct = read(capture_dir, parts=("radar", "mesh", "realsense"))

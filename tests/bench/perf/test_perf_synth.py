@@ -3,8 +3,8 @@ comparison reports the largest difference over the peak."""
 import numpy as np
 
 from bench.perf.synth import frame_difference, radar_path
-from bench.synth import frequency_nodes
 from bench.synth.config import SynthConfig
+from bench.synth.radar import frequency_nodes
 
 FREQS_HZ = np.linspace(72e9, 82e9, 128)
 

@@ -1,6 +1,6 @@
-"""bench.report.agreement from finished sweeps' rows: cell names, ratios to the paper, the paper's pairs, the prior's
-cost,
-and the CLI's one-line error. Rows are made by hand (the sweeps are tested in test_app.py)."""
+"""bench.report.agreement from finished sweeps' rows: cell names, like-with-like means, both metric profiles, the
+paper's relations paired per capture, the prior's cost, the depth camera alone, and the CLI's one-line error. Rows
+are made by hand (the sweeps are tested in test_app.py)."""
 from __future__ import annotations
 
 import subprocess
@@ -14,32 +14,56 @@ from bench.report import agreement
 METRICS = ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm")
 
 
-def _rows(cells: dict[tuple[str, str], float], distance: int = 30) -> pd.DataFrame:
-    """One capture per (method, freq) with every metric equal to the given value (cm)."""
-    return pd.DataFrame([{"object": "01_plate", "distance": distance, "method": m, "freq": f,
-                          **{k: value for k in METRICS}} for (m, f), value in cells.items()])
+def _rows(cells: dict[tuple[str, str], float], distance: int = 30, profile: str = "sound",
+          captures=("01_plate", "03_sphere")) -> pd.DataFrame:
+    """Per (method, freq) one row per capture with every metric equal to the given value (cm); MM-2FSK on the
+    RealSense prior, Table II's rows get theirs from the caller."""
+    return pd.DataFrame([{"object": capture, "distance": distance, "frame": 0, "method": m, "freq": f,
+                          "prior": "realsense" if m in ("mm2fsk", "prior_only") else "none", "grid": "g",
+                          "metrics": profile, "failure": "", **{k: value for k in METRICS}}
+                         for (m, f), value in cells.items() for capture in captures])
 
 
 def test_rows_of_the_two_sweeps_become_the_papers_cells_at_30_cm_only():
     table2 = _rows({("mm2fsk", "d10"): 0.19})
     table3 = pd.concat([_rows({("bp", "full"): 0.5, ("3fsk", "d05_d10"): 2.0}), _rows({("bp", "full"): 9.0}, 40)])
     rows = agreement.cells_of_sweeps(table2, table3)
-    assert sorted(rows.cell) == ["3fsk_d05_d10", "bp_full", "mm2fsk_d10@photogrammetry"]   # the 40 cm row left out
+    assert sorted(set(rows.cell)) == ["3fsk_d05_d10", "bp_full", "mm2fsk_d10@photogrammetry"]   # no 40 cm row
     assert agreement.cells_of_sweeps(None, None).empty
 
 
-def test_report_ratios_pairs_and_the_prior_cost(tmp_path):
+def test_cell_names_split_and_the_geometry_fixed_cells_are_the_scalar_prior_ones_that_cannot_reach_30_cm():
+    assert agreement.split_cell("prior_only_d10") == ("prior_only", "d10", "")
+    assert agreement.split_cell("3fsk_d05_d10") == ("3fsk", "d05_d10", "")
+    assert agreement.split_cell("mm2fsk_d1@photogrammetry") == ("mm2fsk", "d1", "photogrammetry")
+    fixed = [c for c in agreement.PAPER_TABLE3 if agreement.geometry_fixed(c)]
+    assert fixed == ["2fsk_d1", "2fsk_d10", "3fsk_d1_d10", "3fsk_d2_d10"]    # Δ0.5's window [26.4, 53.6] cm holds 30
+
+
+def test_report_compares_like_with_like_both_profiles_relations_first(tmp_path):
     # MM-2FSK d10 RealSense 1.36 cm (the paper's P), photogrammetry 0.19 (the paper's): cost 7.16 as the paper's
-    table2 = _rows({("mm2fsk", "d10"): 0.19})
-    table3 = _rows({("bp", "full"): 2.0, ("mm2fsk", "d10"): 1.36, ("2fsk", "d05"): 2.0, ("mm2fsk", "d05"): 3.0})
-    path = agreement.write_from_sweeps(table2, table3, tmp_path / "agreement.md", "realistic")
-    text = path.read_text()
-    assert "| BP_max | 1/1 | 2.00 | 0.82 | 2.44 |" in text                # C_g 2.00 / 0.82
-    assert "* BP_max C_g x2.44" in text and "* MM-2FSK Δ10.0 P x" not in text
-    assert "BP_max < MM-2FSK Δ10.0 on P (paper): FAILS (2.00 vs 1.36 cm)" in text
-    assert "2FSK Δ0.5 < MM-2FSK Δ0.5 on P (paper): holds (2.00 vs 3.00 cm)" in text
-    cost = [line for line in text.splitlines() if line.startswith("| MM-2FSK Δ10.0 | ")][-1].split(" | ")
-    assert cost[5:7] == ["7.16", "7.16"]                                  # P syn, P paper
+    table2 = _rows({("mm2fsk", "d10"): 0.19}).assign(prior="photogrammetry")
+    table3 = _rows({("bp", "full"): 2.0, ("mm2fsk", "d10"): 1.36, ("2fsk", "d05"): 2.0, ("mm2fsk", "d05"): 3.0,
+                    ("2fsk", "d10"): 10.0, ("prior_only", "d10"): 1.0})
+    table3.loc[(table3.method == "bp") & (table3.object == "03_sphere"), METRICS] = 4.0
+    failed = (table3.method == "mm2fsk") & (table3.freq == "d05") & (table3.object == "03_sphere")
+    table3.loc[failed, ["P_cm", "P_e_cm", "failure"]] = [float("nan"), float("nan"), "no radar point inside mask_bb"]
+    faithful3 = table3.assign(metrics="faithful")
+    faithful3.loc[faithful3.method == "bp", METRICS] = 1.0                   # the faithful profile: BP_max better
+    text = agreement.write_from_sweeps(table2, table3, tmp_path / "agreement.md", "realistic",
+                                       faithful=(None, faithful3)).read_text()
+    assert text.index("stated relations") < text.index("## Table II") < text.index("Within a factor 2")
+    # BP_max's P over 01_plate alone, the capture every Table III cell reconstructed (its 4.0 on 03 left out)
+    assert ("BP_max < MM-2FSK Δ10.0 on P (paper 0.94 vs 1.36 cm): sound: reversed (2.00 vs 1.36 cm; BP_max "
+            "better in 0 of 1 captures, p n/a); faithful: holds (1.00 vs 1.36 cm; BP_max better in 1 of 1 captures, "
+            "p n/a)") in text
+    assert "| BP_max | 0/2 / 0/2 | 2.00 | 1.00 | 0.82 |" in text             # both profiles on 01_plate alone
+    assert "| MM-2FSK Δ0.5 | 1/2 / 1/2 |" in text and "| 2FSK Δ10.0 § |" in text
+    assert "| Prior only (no radar) | 0/2 / 0/2 | 1.00 | 1.00 | – |" in text
+    assert ("MM-2FSK Δ10.0: the RealSense prior costs on P, Table III / Table II > 1 (paper x7.16): sound: holds "
+            "(x7.16; the ground-truth prior better in 2 of 2 captures, p 0.5)") in text
+    assert "sound: P: MM-2FSK Δ10.0 1.36 cm against the camera's 1.00 cm (1.36x)" in text
+    assert "sound: P within 2x in" in text and "1 geometry-fixed cells §, 4 values, left out" in text
     assert agreement.write_from_sweeps(None, _rows({("bp", "full"): 1.0}, 40), tmp_path / "none.md", "x") is None
 
 

@@ -59,11 +59,13 @@ def test_placement_of_a_plate_at_30_cm_and_its_cells_p(synth_capture):
 
 def test_from_results_with_the_captures_adds_the_measured_sections(synth_capture, tmp_path):
     capture = synth_capture("01_plate", 30, frequency_points=16)
-    rows = pd.DataFrame([{"object": "01_plate", "distance": 30, "method": "mm2fsk", "freq": "d10",
+    rows = pd.DataFrame([{"object": "01_plate", "distance": 30, "frame": 0, "method": "mm2fsk", "freq": "d10",
+                          "prior": "realsense", "grid": "from_capture",
                           **{k: 0.2 for k in ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm")}}])
-    path = agreement.write_from_sweeps(rows, rows, tmp_path / "a.md", "realistic", capture.parent.parent)
+    table2 = rows.assign(prior="photogrammetry")
+    path = agreement.write_from_sweeps(table2, rows, tmp_path / "a.md", "realistic", capture.parent.parent)
     text = path.read_text()
     assert "## Placement against the scalar prior's windows" in text and "| 01_plate | 30." in text
     assert "## The RealSense prior against the ground truth" in text
-    bare = agreement.write_from_sweeps(rows, rows, tmp_path / "b.md", "realistic").read_text()
+    bare = agreement.write_from_sweeps(table2, rows, tmp_path / "b.md", "realistic").read_text()
     assert "Placement" not in bare

@@ -137,24 +137,52 @@ def _rendered(page) -> tuple[str, str]:
 def test_report_renders_in_a_real_browser(sweep_root, tmp_path):
     page = html.write_report([sweep_root], tmp_path / "report.html")
     text = page.read_text()
-    assert "http://" not in text and "https://" not in text          # self-contained
+    assert "http://" not in text and "https://" not in text          # nothing from the network
     dom, log = _rendered(page)
-    for header in ("Table III", "Means over captures", "Spread across captures", "Per object: P (cm)",
+    for header in ("Verdict", "Table III", "Means over captures", "Spread across captures", "Per object: P (cm)",
                    "Runtime against error", "Pictures per capture", "Cells: configuration and code version"):
         assert header in dom, header
-    assert "1/2" in dom and "failed: P_cm: no point to compare" in dom        # success counts, per object
-    assert "0.30 [" in dom or "0.80 [" in dom                               # median [IQR]
+    assert "1/2" in dom and "failed: P_cm: no point to compare" in dom        # failure counts, per object
     assert "0.1.0+abc123" in dom and "cell=mm2fsk_d10" in dom               # code version, overrides
     found = re.search(r'data-images="(\d+)" data-images-loaded="(\d+)"', dom)
     assert found, "the page's load check did not run"
     total, loaded = map(int, found.groups())
     assert total == 1 + 2 * len(CAPTURES) and loaded == total              # the plot, 2 pictures per capture
     assert not re.search(r"CONSOLE.*(Uncaught|Error)", log), log[-2000:]
-    broken = tmp_path / "broken.html"                                     # the check can fail: a broken image
-    broken.write_text(text.replace("data:image/png;base64,", "data:image/png;base64,AAAA", 1))
+    broken = tmp_path / "broken.html"                                     # the check can fail: a missing image
+    broken.write_text(re.sub(r'src="[^"]+"', 'src="missing.png"', text, count=1))
     total, loaded = map(int, re.search(r'data-images="(\d+)" data-images-loaded="(\d+)"',
                                        _rendered(broken)[0]).groups())
     assert loaded == total - 1
+
+
+def test_report_opens_with_a_verdict_links_its_images_and_redraws_only_what_changed(sweep_root, tmp_path):
+    pytest.importorskip("open3d")
+    root = shutil.copytree(sweep_root, tmp_path / "sweep")
+    page = html.write_report([root], tmp_path / "report.html")
+    text = page.read_text()
+    assert text.index("Verdict") < text.index("Means over captures")
+    assert "P: 2FSK Δ0.5, 0.30 cm over 1 of 2 captures; tied with MM-2FSK Δ10.0" in text   # the one both reconstructed
+    assert "2FSK Δ0.5 (1 of 2): 03_sphere 30: P_cm: no point to compare" in text
+    assert "03_sphere 30 cm (not in the means)" in text
+    sources = re.findall(r'<img alt="[^"]*" src="([^"]+)"', text)
+    assert len(sources) == 1 + 2 * len(CAPTURES) and "data:" not in text
+    assert all((tmp_path / source).is_file() for source in sources)          # relative to the page
+    assert page.stat().st_size < 200_000
+    pictures_drawn = {p: p.stat().st_mtime_ns for p in (root / "pictures").rglob("*.png")}
+    plot = root / "runtime_vs_error.png"
+    plot_drawn = plot.stat().st_mtime_ns
+    html.write_report([root], tmp_path / "report.html")
+    assert {p: p.stat().st_mtime_ns for p in pictures_drawn} == pictures_drawn   # unchanged inputs: none redrawn
+    assert plot.stat().st_mtime_ns == plot_drawn
+    rows = pd.read_csv(root / "results.csv")                              # merged by the first report
+    rows.loc[(rows.method == "mm2fsk") & (rows.object == "01_plate"), "P_cm"] = 0.31   # the plot changes, not a picture
+    rows.to_csv(root / "results.csv", index=False)
+    html.write_report([root], tmp_path / "report.html")
+    assert {p: p.stat().st_mtime_ns for p in pictures_drawn} == pictures_drawn
+    assert plot.stat().st_mtime_ns != plot_drawn
+    assert "P: 2FSK Δ0.5, 0.30 cm over 1 of 2 captures; better than the runner-up MM-2FSK Δ10.0 (0.31 cm)" in \
+        (tmp_path / "report.html").read_text()
 
 
 def test_report_cli_mistakes_are_one_line(tmp_path):

@@ -1,12 +1,12 @@
-"""The radar echo from frequency nodes on compact blocks (bench.synth.leg_sum, frequency_nodes) against float64 sums
-on fresh random scenes: extended surfaces of many scatterers (the node path), the lobe and element gains, and the
+"""The radar echo from frequency nodes on compact blocks (bench.synth.radar.leg_sum, frequency_nodes) against float64
+sums on fresh random scenes: extended surfaces of many scatterers (the node path), the lobe and element gains, and the
 bistatic rows of multipath."""
 import numpy as np
 import pytest
 
 from bench.maroon.antennas import load_antenna_array
-from bench.synth import frequency_nodes, leg_sum, multipath
-from bench.synth.radar_model import leg_gains, simulate_frame
+from bench.synth.radar import frequency_nodes, leg_sum, multipath
+from bench.synth.radar.model import leg_gains, simulate_frame
 
 C_M_PER_S = 299_792_458.0
 FREQS_HZ = np.linspace(72e9, 82e9, 128)

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.synth.leg_sum import leg_sum
 from bench.synth.meshes import indexed
-from bench.synth.radar_model import leg_distances
+from bench.synth.radar.leg_sum import leg_sum
+from bench.synth.radar.model import leg_distances
 from bench.synth.sampling import SurfaceSamples
 
 LOBE_CUTOFF = 1e-2      # as radar_scene.LOBE_CUTOFF
@@ -122,7 +122,7 @@ def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs
                    element_exponent: float = 0.0) -> np.ndarray:
     """The double-bounce echo of `pairs`, both directions, complex64 (n_rx, n_tx, F) in the direct echo's units.
 
-    Rows 0..K-1 are the forward paths (tx -> p1 -> p2 -> rx), rows K..2K-1 the reverse ones (bench.synth.leg_sum).
+    Rows 0..K-1 are the forward paths (tx -> p1 -> p2 -> rx), rows K..2K-1 the reverse ones (bench.synth.radar.leg_sum).
     """
     tx_m, rx_m = np.asarray(tx_m, float), np.asarray(rx_m, float)
     n_pairs = len(pairs.hop_m)

@@ -4,14 +4,14 @@
 
 Per frequency the sum is a matrix product S_f = (A_f * a)^T B_f with A_f[k, rx] = exp(-j k_f |p_k - rx|) / |p_k - rx|
 and B_f[k, tx] likewise, computed on spatially compact blocks of scatterers at a few node frequencies and
-interpolated to all (bench.synth.leg_sum, bench.synth.frequency_nodes).
+interpolated to all (bench.synth.radar.leg_sum, bench.synth.radar.frequency_nodes).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from bench.synth.config import C_M_PER_S, SynthConfig
-from bench.synth.leg_sum import leg_sum
+from bench.synth.radar.leg_sum import leg_sum
 from bench.synth.sampling import SurfaceSamples
 
 

@@ -6,7 +6,7 @@
 complex weights). Per frequency this is a complex64 matrix product (n_rx x K)(K x n_tx). The rows are split into
 blocks that lie close together in space (recursive median splits, `compact_blocks`), so that within a block each
 antenna's leg lengths span little; the block's sum then varies slowly with frequency after its centre path is
-factored out and is computed at a few node frequencies and interpolated to all (bench.synth.frequency_nodes).
+factored out and is computed at a few node frequencies and interpolated to all (bench.synth.radar.frequency_nodes).
 
 Phases are formed in float64 and reduced modulo one cycle; across equidistant nodes the phasors advance by one
 complex64 multiply per step and are re-formed exactly every `RESEED_STEPS` nodes. Blocks alternate between
@@ -23,7 +23,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from bench.synth.config import C_M_PER_S
-from bench.synth.frequency_nodes import interpolator
+from bench.synth.radar.frequency_nodes import interpolator
 
 RESEED_STEPS = 16       # exact phasors every 16 nodes bound the complex64 recursion error to ~1e-6
 BLOCK_ROWS = 2048       # rows per block: small enough that a block spans a few cm, large enough for BLAS

@@ -1,0 +1,146 @@
+"""Per-capture work outside the methods, done once per capture and process, not once per cell: reading (each part
+of a frame read once) and the ground truth (ray casts, silhouettes, KD-tree). With a result store, the parsed mesh
+is kept there by the content of its file (`<store>/meshes/`), so later sweeps need no Open3D to read it.
+
+The ground truth's rasters (the costly part: two ray casts of the mesh) are also kept on disk under the result
+store, `<store>/ground_truth/<key>.h5`, keyed like the store's cells by the content of the files they come from
+(metadata, alignment, mesh, the frame's pose, the radar calibration's grid) and the code version: a later sweep
+(another experiment on the same captures) reads two arrays instead of importing Open3D, reading the mesh and
+casting rays, and needs no mesh at all unless its prior is the photogrammetry one.
+"""
+from __future__ import annotations
+
+import collections
+import dataclasses
+import functools
+import io
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from bench.harness import atomic
+from bench.harness.store import Store, code_version
+from bench.maroon import reader
+from bench.maroon.antennas import load_antenna_array
+from methods.domain.capture import Capture, Mesh
+from metrics.evaluate import GroundTruth, ground_truth_from_rasters, ground_truth_rasters_m
+
+CAPTURES_KEPT = 16           # capture frames kept in memory (a sweep's captures: the paper's 8 at one distance)
+GROUND_TRUTHS_KEPT = 16
+RASTERS = ("depth_m", "reference_depth_m")
+
+_CAPTURES: collections.OrderedDict = collections.OrderedDict()   # (frame key) -> (Capture, parts read)
+_GROUND_TRUTHS: collections.OrderedDict = collections.OrderedDict()
+
+
+def read(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: bool,
+         antenna_files: tuple[str | None, str | None], store: Store | None = None) -> Capture:
+    """The capture frame with `parts`, each part read once per process: a worker (or the basic launcher's one
+    process) runs many cells on the same captures, BP needing radar and mesh and MM-2FSK the RealSense frame too,
+    so a later cell reads only the parts no earlier cell read (the RealSense frame paired with the cached radar
+    frame's time, as read_capture pairs it). With a store, a mesh file parsed once is kept there (`kept_mesh`)."""
+    key = (capture_dir, frame, empty_filtered, antenna_files)
+    cached, have = _CAPTURES.pop(key, (None, ()))
+    missing = tuple(part for part in parts if part not in have)
+    if missing:
+        paired = None
+        if "realsense" in missing and cached is not None and cached.radar is not None \
+                and (capture_dir / "realsense").is_dir():
+            paired = reader.realsense_pairing(capture_dir / "realsense", cached.radar.timestamp_s).realsense_frame
+        new = reader.read_capture(capture_dir, frame=frame, parts=missing, empty_filtered=empty_filtered,
+                                  antennas=load_antenna_array(*antenna_files), realsense_frame=paired,
+                                  mesh_reader=None if store is None else functools.partial(kept_mesh, store))
+        if cached is not None:
+            new = dataclasses.replace(cached, notes=cached.notes + new.notes,
+                                      transforms=new.transforms if "mesh" in missing else cached.transforms,
+                                      **{part: getattr(new, part) for part in missing})
+        cached, have = new, have + missing
+    _CAPTURES[key] = (cached, have)
+    while len(_CAPTURES) > CAPTURES_KEPT:
+        _CAPTURES.popitem(last=False)
+    return dataclasses.replace(cached, **{part: None for part in reader.PARTS if part not in parts})
+
+
+def kept_mesh(store: Store, path: Path) -> Mesh:
+    """The mesh file `path` parsed (bench.maroon.reader.read_mesh: Open3D and its checks) the first time its
+    content is seen, then read back from `<store>/meshes/<sha256 of the file>.h5` (vertices, triangles as
+    parsed): a sweep whose prior is the photogrammetry mesh then neither imports Open3D nor parses the OBJ."""
+    kept = store.root / "meshes" / f"{store.file_digest(path)}.h5"
+    if kept.is_file():
+        with h5py.File(kept, "r") as h5:
+            return Mesh(vertices=h5["vertices"][()], triangles=h5["triangles"][()], path=path)
+    mesh = reader.read_mesh(path)
+    _keep(kept, {"vertices": mesh.vertices, "triangles": mesh.triangles})
+    return mesh
+
+
+def _remember(key, gt: GroundTruth) -> GroundTruth:
+    _GROUND_TRUTHS[key] = gt
+    _GROUND_TRUTHS.move_to_end(key)
+    while len(_GROUND_TRUTHS) > GROUND_TRUTHS_KEPT:
+        _GROUND_TRUTHS.popitem(last=False)
+    return gt
+
+
+def kept_key(store: Store, capture_dir: Path, frame: int, empty_filtered: bool, grid) -> str | None:
+    """The disk key of a frame's ground truth on `grid`: the digest of the files it is made from (metadata,
+    alignment, mesh, the frame's pose where the capture has per-frame poses), the grid and the code version; None
+    when the capture has no mesh (no ground truth to keep). A static object's frames share it."""
+    files = reader.files_read(capture_dir, frame, ("mesh",), empty_filtered)
+    if not any(path.parent.name == "photogrammetry" for path in files):
+        return None
+    return store.key({"ground_truth": store.capture_digest(files), "grid": dataclasses.asdict(grid),
+                      "code": code_version()})
+
+
+def load_kept(store: Store, key: str, capture: Capture) -> GroundTruth | None:
+    """The ground truth kept under `key` for this capture frame (its radar part read), or None."""
+    path = store.root / "ground_truth" / f"{key}.h5"
+    if not path.is_file():
+        return None
+    with h5py.File(path, "r") as h5:
+        rasters = [h5[name][()] for name in RASTERS]
+    return ground_truth_from_rasters(*rasters, capture.radar.grid, capture.metadata)
+
+
+def ground_truth(capture_dir: Path, capture: Capture, with_mesh: Callable[[], Capture], store: Store | None = None,
+                 key: str | None = None) -> GroundTruth | None:
+    """The capture's ground truth on its metric grid (the frame's calibration grid), whatever the cell's prior, or
+    None without a mesh: from memory (a static object's frames and every cell of a process share it), else from
+    the store's kept rasters under `key` (`kept_key`), else cast from the mesh (`with_mesh()` gives the capture
+    with its mesh read; the rasters are then kept under `key`)."""
+    grid = capture.radar.grid
+    memory_key = None if key is None else (capture_dir, grid, key)
+    if memory_key in _GROUND_TRUTHS:
+        _GROUND_TRUTHS.move_to_end(memory_key)
+        return _GROUND_TRUTHS[memory_key]
+    gt = None if key is None else load_kept(store, key, capture)
+    if gt is None:
+        meshed = capture if capture.mesh is not None else with_mesh()
+        if meshed.mesh is None:
+            return None
+        if memory_key is None:          # no store: known by the pose the mesh was read with
+            pose = meshed.transforms.get("photogrammetry2radar")
+            memory_key = (capture_dir, grid, None if pose is None else pose.tobytes())
+            if memory_key in _GROUND_TRUTHS:
+                _GROUND_TRUTHS.move_to_end(memory_key)
+                return _GROUND_TRUTHS[memory_key]
+        rasters = ground_truth_rasters_m(meshed, grid)
+        gt = ground_truth_from_rasters(*rasters, grid, meshed.metadata)
+        if key is not None:
+            _keep(store.root / "ground_truth" / f"{key}.h5", dict(zip(RASTERS, rasters, strict=True)))
+    return _remember(memory_key, gt)
+
+
+def _keep(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """Write the arrays whole or not at all (bench.harness.atomic, as the store writes its cells)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    image = io.BytesIO()
+    with h5py.File(image, "w") as h5:
+        for name, values in arrays.items():
+            h5.create_dataset(name, data=values, compression="gzip", compression_opts=1, shuffle=True)
+        h5.attrs["made_by"] = json.dumps({"code": code_version()})
+    atomic.write_bytes(path, image.getvalue())

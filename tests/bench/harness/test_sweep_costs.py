@@ -1,0 +1,138 @@
+"""A sweep's fixed and per-capture costs paid once (issue 29): each job composed once, the ground truth kept by
+content in the store and read back bit for bit, outputs written on a background thread, the stage clock."""
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from bench.harness import CONFIG_DIR, app, captures, stages
+from bench.harness.results import BackgroundWriter
+from bench.maroon import reader
+
+
+class _Loader:
+    def __init__(self):
+        self.calls = []
+
+    def load_sweep_config(self, master_config, sweep_overrides):
+        self.calls.append(tuple(sweep_overrides))
+        return {"composed": tuple(sweep_overrides), "n": len(self.calls)}
+
+
+def test_the_launcher_gets_the_configuration_the_check_composed_once():
+    # imported here: Hydra's plugin scan (other tests) imports the module anew, and pickling needs the current class
+    from hydra_plugins.mm2fsk_bench.sweeper import _ComposedOnce
+
+    loader = _Loader()
+    once = _ComposedOnce(loader)
+    once.keep({}, ["freq=d05"])
+    first = once.load_sweep_config({}, ["freq=d05"])
+    assert loader.calls == [("freq=d05",)] and first == {"composed": ("freq=d05",), "n": 1}
+    assert once.load_sweep_config({}, ["freq=d05"])["n"] == 2          # handed over once: the launcher edits it
+    once.keep({}, ["freq=d1"])
+    assert pickle.loads(pickle.dumps(once))._kept == {}                 # other processes compose their own
+
+
+def _cfg(synth_root, store, *overrides):
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        return compose(config_name="config", overrides=["dataset=maroon", f"dataset.root={synth_root}",
+                                                      "dataset.captures=[01_plate/30]", f"store.dir={store}",
+                                                      *overrides])
+
+
+def test_kept_ground_truth_scores_like_a_fresh_one_without_reading_the_mesh(synth_root, tmp_path, monkeypatch):
+    """A second process on the same captures (emptied memory caches) reads the kept rasters: no ray cast, no mesh
+    read for a RealSense cell, and every score equal to the run without a store."""
+    casts, parts = [], []
+    real_cast, real_read = captures.ground_truth_rasters_m, reader.read_capture
+    monkeypatch.setattr(captures, "ground_truth_rasters_m", lambda c, g: casts.append(c.name) or real_cast(c, g))
+    monkeypatch.setattr(reader, "read_capture", lambda *a, **k: parts.append(k["parts"]) or real_read(*a, **k))
+
+    def fresh_process():
+        monkeypatch.setattr(captures, "_CAPTURES", type(captures._CAPTURES)())
+        monkeypatch.setattr(captures, "_GROUND_TRUTHS", type(captures._GROUND_TRUTHS)())
+
+    fresh_process()
+    (plain,) = app.run(_cfg(synth_root, "null", "cell=mm2fsk_d10"), tmp_path / "plain")
+    fresh_process()
+    app.run(_cfg(synth_root, tmp_path / "store", "cell=2fsk_d05"), tmp_path / "first")
+    assert len(casts) == 2 and len(list((tmp_path / "store" / "ground_truth").glob("*.h5"))) == 1
+    fresh_process()
+    parts.clear()
+    (kept,) = app.run(_cfg(synth_root, tmp_path / "store", "cell=mm2fsk_d10"), tmp_path / "kept")
+    assert len(casts) == 2 and parts == [("radar", "realsense")]            # no cast, no mesh
+    for column in ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm", "off_pct", "C_g_px", "C_s_px", "P_px", "P_e_px"):
+        assert kept[column] == plain[column] or (np.isnan(kept[column]) and np.isnan(plain[column])), column
+
+
+def test_a_failed_background_write_fails_the_run():
+    writer = BackgroundWriter()
+    written = []
+    writer.submit(written.append, 1)
+
+    def fail():
+        raise OSError(28, "No space left on device", "/out/arrays.h5")
+
+    writer.submit(fail)
+    with pytest.raises(OSError, match="No space left"):
+        writer.close()
+    assert written == [1]
+
+
+def test_a_row_timed_on_a_busy_machine_is_marked_contended(synth_root, tmp_path, monkeypatch):
+    monkeypatch.setattr(app, "machine_load", lambda: 1e3)
+    (row,) = app.run(_cfg(synth_root, "null", "cell=2fsk_d05", "timing.repeat=3"), tmp_path / "busy")
+    assert row["timing"] == "contended" and row["load_1m"] == 1e3
+    assert 1 <= row["runtime_runs"] <= 3 and row["cpu_ms"] > 0
+    assert app._reusable("contended", "alone")                       # still busy: re-measuring would not help
+    monkeypatch.setattr(app, "machine_load", lambda: 0.0)
+    assert not app._reusable("contended", "alone") and not app._reusable("parallel", "alone")
+    assert app._reusable("alone", "alone") and app._reusable("parallel", "parallel")
+
+
+def test_stage_seconds_go_to_the_innermost_open_stage(monkeypatch):
+    clock = iter([0.0, 1.0, 3.0, 6.0, 6.0, 10.0])
+    monkeypatch.setattr(stages, "_on", True)
+    monkeypatch.setattr(stages, "_seconds", type(stages._seconds)())
+    monkeypatch.setattr(stages, "_clock", lambda: next(clock))
+    with stages.stage("reading"):           # 0 .. 1 reading, 1 .. 3 imports, 3 .. 6 reading again
+        with stages.stage("imports"):
+            pass
+    with stages.stage("methods"):           # 6 .. 10
+        pass
+    assert dict(stages._seconds) == {"reading": 4.0, "imports": 2.0, "methods": 4.0}
+
+
+def test_a_job_records_its_seconds_per_frame_for_the_next_estimate(synth_root, tmp_path):
+    from bench.harness.durations import Durations, configuration_id
+
+    cfg = _cfg(synth_root, tmp_path / "store", "cell=2fsk_d05")
+    app.run(cfg, tmp_path / "a")
+    method = app._method(cfg)
+    cell = app._cell(cfg, "cpu", method)
+    seconds = Durations(tmp_path / "store").seconds(configuration_id(cell))
+    assert seconds is not None and seconds > 0
+    assert configuration_id({**cell, "code": "other"}) == configuration_id(cell)      # survives a code change
+    assert configuration_id({**cell, "threshold_db": 3.0}) != configuration_id(cell)
+
+
+def test_a_kept_mesh_is_read_back_as_parsed(synth_root, tmp_path, monkeypatch):
+    """The photogrammetry prior's mesh: parsed by Open3D once, then read from the store; same scores."""
+    parsed = []
+    real = reader.read_mesh
+    monkeypatch.setattr(reader, "read_mesh", lambda path: parsed.append(path) or real(path))
+    rows = []
+    for name in ("first", "again"):
+        monkeypatch.setattr(captures, "_CAPTURES", type(captures._CAPTURES)())
+        monkeypatch.setattr(captures, "_GROUND_TRUTHS", type(captures._GROUND_TRUTHS)())
+        rows += app.run(_cfg(synth_root, tmp_path / "store", "method=mm2fsk", "freq=d05", "prior=photogrammetry"),
+                        tmp_path / name)
+        for cell in (tmp_path / "store" / "cells").glob("*"):          # the second run computes again
+            cell.unlink()
+    assert len(parsed) == 1 and len(list((tmp_path / "store" / "meshes").glob("*.h5"))) == 1
+    first, again = rows
+    for column in ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm", "valid_px"):
+        assert first[column] == again[column], column
