@@ -33,7 +33,8 @@ from bench.report import agreement, tables
 
 EXPERIMENTS = ("table2", "table3")
 REPORT_FILES = ("{table}.md", "{table}.csv", "{table}.tex", "runtime_vs_error.png")
-# One job at a time: runtimes measured alone (README, "The main job" has the measured cost of this choice).
+# One job at a time: runtimes measured alone (docs/measurements/performance.md "The demo's cost"
+# has the measured cost of this choice).
 LAUNCHER = "basic"
 QUIET = ("+hydra.job_logging.handlers.console.level=WARNING",   # per-capture lines stay in each job's app.log
          "hydra.hydra_logging.root.level=WARNING")             # no launcher chatter: the jobs print progress

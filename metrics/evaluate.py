@@ -15,7 +15,8 @@ computed on another grid is resampled first, metrics.resample):
   silhouette;
 * off = share (%) of radar points off the silhouette (false positives: the paper's P never sees them), off_err
   their mean distance to the nearest ground-truth point.
-`faithful=True` reproduces the reference code's C_g, C_s, P and P_e instead (README "The faithful profile"):
+`faithful=True` reproduces the reference code's C_g, C_s, P and P_e instead (docs/guide/metrics.md "The faithful
+profile"):
 * ground truth sampled at MAROON's shifted positions K^-1 (u + 0.5, v + 0.5) (up to one pixel off the pixel
   centres at the far edges), triangulated with the reference's quad rule, restricted to mask_bb for C_g / C_s;
 * radar points triangulated with the reference's quad rule (methods.domain.lattice 'maroon': three-valid quads

@@ -7,7 +7,7 @@ bits across machines; that moves phases by ~1e-6 rad, which can flip a pixel at 
 1 cm triangulation threshold or a 2FSK ambiguity. One flipped pixel among the ~10^3-10^4 compared ones changes a
 mean by far less than 0.05 cm, and for the large means of ambiguous methods (several cm) by far less than 10 %;
 real changes to a method or metric (a sign, a unit, a shifted grid) move the values by much more.
-When a change is meant: `bash run.sh demo --update-results` regenerates the baselines (README, "Regression baselines").
+When a change is meant: `bash run.sh demo --update-results` regenerates the baselines (docs/guide/baselines.md).
 """
 from __future__ import annotations
 

@@ -51,8 +51,9 @@ LOCAL_FS_TYPES = {"tmpfs", "ramfs", "devtmpfs"}
 POLL_S = 2.0
 CONTROLLER_LOST_S = 900.0   # squeue failing this long: report the pending jobs instead of waiting forever
 GONE_GRACE_S = 15.0         # a finished job's result file may show on a shared file system a little later
-# Minutes per capture frame on one node, generous (README "The main job" and notes/gpu.md measured ~20 min for
-# BP_max on the paper grid on 2 CPU cores, ~1 s for the FSK methods): (method, many frequencies?, grid, device).
+# Minutes per capture frame on one node, generous (docs/measurements/performance.md "The demo's cost" and
+# docs/measurements/gpu.md measured ~20 min for BP_max on the paper grid on 2 CPU cores, ~1 s for the FSK methods):
+# (method, many frequencies?, grid, device).
 FRAME_MINUTES = {("bp", True, "paper", "cpu"): 30.0, ("bp", False, "paper", "cpu"): 4.0,
                  ("bp", True, "paper", "cuda"): 0.2, ("bp", False, "paper", "cuda"): 0.1}
 DEFAULT_FRAME_MINUTES = {"bp": 1.0, "2fsk": 0.1, "3fsk": 0.1, "mm2fsk": 0.1}

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Every GPU figure of notes/gpu.md round 10 on the device machine, in eleven calls of the `run` tool, back to back
+# Every GPU figure of docs/measurements/gpu.md round 10 on the device machine, in eleven calls of the `run` tool, back to back
 # (a call carries at most 64 MiB: the wheels and the data travel in parts). Here, once:
 #   [SEQ=CAPTURE] bash bench/perf/device_figures.sh pack [ROOT]   # ROOT: the 30 cm catalogue (default data/synthetic);
 #                    # SEQ: a sequence capture (default: bench.perf.stream's bottle sequence, generated if missing)

@@ -6,7 +6,7 @@ set size from the kernel (os.wait4's rusage: ru_maxrss of that process and the c
 from a small interpreter (WAIT4). Beside
 each it prints the model's peak and the memory the SLURM launcher asks for (`bench.harness.slurm_resources`), so the
 model's error and margin are visible.
-Writes OUT/perf_memory.csv (default outputs/perf/; the README's SLURM section quotes the figures).
+Writes OUT/perf_memory.csv (default outputs/perf/; docs/guide/slurm.md "Memory and time per job" quotes the figures).
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Every skip accounted for in runtime against error: `python -m bench.perf correlate --section skips [options]`.
+"""Every skip accounted for in runtime against error: `python -m bench.perf skips [options]`.
 
 For every capture of a dataset (default: the synthetic catalogue at 30 cm) and every cell (method x frequency
 configuration x prior), each skip of `methods.skips.settings` runs off and on beside the full computation (`roi=none`),

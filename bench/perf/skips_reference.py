@@ -1,5 +1,5 @@
 """Full-computation BP depth maps as float64 direct sums on a CUDA device (CuPy), the reference of
-`bench.perf.correlate --section skips` where the CPU takes too long for them (BP_max on the paper grid: ~20 min per
+`python -m bench.perf skips` where the CPU takes too long for them (BP_max on the paper grid: ~20 min per
 frame).
 
     python -m bench.perf skips-reference export --root DIR --out FRAMES.npz [--objects A/30 ...]   # here
@@ -12,9 +12,9 @@ and frequency, the steering vectors a_r = exp(j k |p - rx_r|), b_t = exp(j k |p 
 sum a^T S_f b / (n_rx n_tx) as one complex128 matrix product per plane, sums over frequencies, and extracts depth
 and max projection exactly as `methods.bp.peak_depth_m` (argmax + parabola on dB), then the -14 dB filter
 (`methods.ops.filtering`): the computation `roi=none` does on the CPU, in float64 (the CPU's float32 path agrees with
-it to ~1e-5 relative, notes/gpu.md; measured: depth within 0.4 um on a small grid). `compute` writes one bundle
-(the device machine returns few files); `split` turns it into `<object>_<distance>_<cell>_<grid>.npz` files with
-`depth_m`, the folder `--reference` of `bench.perf.correlate --section skips` reads.
+it to ~1e-5 relative, docs/measurements/gpu.md; measured: depth within 0.4 um on a small grid). `compute` writes one
+bundle (the device machine returns few files); `split` turns it into `<object>_<distance>_<cell>_<grid>.npz` files with
+`depth_m`, the folder `--reference` of `python -m bench.perf skips` reads.
 """
 from __future__ import annotations
 

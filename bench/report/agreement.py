@@ -19,7 +19,7 @@ how far the synthetic benchmark is from the paper's real-data Tables II and III.
    the sweeps' captures under ROOT also the placement and prior-error sections (the demo does this).
 
 Every cell runs on its own grid as the demo does (BP: the paper's 301 x 301 x 201, configs/cell/). Costs are in
-the README.
+docs/measurements/agreement.md.
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Noise against the physical limit: MM-2FSK depth standard deviation vs the Cramer-Rao bound.
 
 Per-sample SNR = mean |s|^2 / sigma^2 over the frame's samples (two frequencies), complex Gaussian noise of
-power sigma^2 (`bench.synth.radar_model.noise_frame`). With N = 8836 pairs the normalised matched-filter phasor
+power sigma^2 (`bench.synth.radar.model.noise_frame`). With N = 8836 pairs the normalised matched-filter phasor
 c_k = (1/N) sum s w carries noise of variance sigma^2 / N, so each phase has variance 1 / (2 N SNR_k) and the
 phase of c2 conj(c1) the sum of both, 1 / (N SNR): hence
 
@@ -22,7 +22,7 @@ import numpy as np
 
 from bench.stress.scenes import antennas, config_freqs_hz, frame, noise_power, pixel_grid
 from bench.synth.memory import plate_points_m
-from bench.synth.radar_model import noise_frame
+from bench.synth.radar.model import noise_frame
 from methods.backends import correlate
 from methods.mm2fsk import reconstruct_mm2fsk
 from methods.ops.correlate import C_M_PER_S

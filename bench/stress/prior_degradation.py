@@ -2,7 +2,7 @@
 
 Scene: the catalogue's 12 x 12 cm metal plate (`01_plate`) at 0.40 m. Radar: its visible surface samples through
 the generator's signal model, noise-free (this experiment isolates the prior). Prior: the generator's D435-like
-depth camera (`bench.synth.depth_camera`) renders the scene with one knob of `SynthConfig` changed, the frame
+depth camera (`bench.synth.camera.depth`) renders the scene with one knob of `SynthConfig` changed, the frame
 is back-projected with the nominal extrinsics (`realsense2radar`) and rasterised (`methods.prior.priors`), so a pose
 error (`extrinsic_error_mm` / `_deg`, random direction per repetition) becomes a prior error as on a real rig.
 Knobs: `disparity_sigma_px` (stereo noise, sigma_z = z^2 sigma / (f b): 5.2 mm per pixel at 0.40 m),
@@ -23,8 +23,9 @@ import dataclasses
 import numpy as np
 
 from bench.stress.scenes import antennas, config_freqs_hz, dd_max_m, pixel_grid
-from bench.synth import SynthConfig, build_scene, depth_camera, simulate_frame
-from bench.synth.radar_model import surface_amplitudes
+from bench.synth import SynthConfig, build_scene, simulate_frame
+from bench.synth.camera import depth as depth_camera
+from bench.synth.radar.model import surface_amplitudes
 from bench.synth.sampling import visible_samples
 from methods.domain.capture import CameraIntrinsics, DepthFrame, RadarGrid
 from methods.mm2fsk import reconstruct_mm2fsk

@@ -27,7 +27,7 @@ def write_summary(results: dict[str, list[dict]], seconds: dict[str, float], qui
                                                 "pickle_executed"]]
     sections = [
         f"# Stress report ({'quick' if quick else 'full'} run; {sum(seconds.values()):.0f} s)\n",
-        "Regenerate with `python -m bench.stress`; README.md section 'Stress report' explains every column.\n",
+        "Regenerate with `python -m bench.stress`; docs/guide/stress.md explains every column.\n",
         "## 1. Precision: float32 paths vs the float64 reference (worst over distances, grids, configurations)\n",
         _table(precision),
         "\n## 2. Phase wrapping: |offset| / dd_max up to which every offset succeeds, and from which none does\n",

@@ -4,7 +4,7 @@ Public API: `simulate_frame` (point scatterers -> frame), `generate_capture`, `g
 `SynthConfig`, `CATALOGUE` (the demo's objects), `FULL_CATALOGUE`, `CATALOGUES`. See bench/synth/README.md.
 """
 from bench.synth.config import SynthConfig
-from bench.synth.radar_model import simulate_frame
+from bench.synth.radar.model import simulate_frame
 from bench.synth.scenes import CATALOGUE, CATALOGUES, FULL_CATALOGUE, build_scene
 
 _NEED_OPEN3D = {"CaptureResult", "ensure_capture", "generate_capture", "generate_catalogue"}

@@ -92,7 +92,7 @@ class SynthConfig:
     element_gain_dbi: float = 6.0            # per antenna element
     noise_figure_db: float = 12.0            # receiver
     if_bandwidth_hz: float = 1.0e6           # 1 / dwell per frequency step and transmitter
-    amplitude_scale: float = 1.0             # calibrated-frame scale: multiplies every radar sample (see README)
+    amplitude_scale: float = 1.0             # calibrated-frame scale: multiplies every radar sample (synth/README.md)
     # ground truth (photogrammetry mesh to radar registration residual)
     gt_registration_mm: float = 0.0
     gt_registration_deg: float = 0.0

@@ -21,9 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.synth import depth_camera, motion, ownership, photogrammetry, radar_scene, writer
+from bench.synth import motion, ownership, writer
+from bench.synth.camera import depth as depth_camera
+from bench.synth.camera import photogrammetry
 from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
 from bench.synth.meshes import rotation_matrix
+from bench.synth.radar import scene as radar_scene
 from bench.synth.scenes import CATALOGUE, FULL_CATALOGUE, build_scene
 
 MANIFEST_NAME = ownership.MANIFEST_NAME
@@ -54,7 +57,7 @@ def _photogrammetry2radar(rng: np.random.Generator) -> np.ndarray:
 
 
 def _radar_frames(scene, config: SynthConfig, rng: np.random.Generator):
-    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame (bench.synth.radar_scene)."""
+    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame (bench.synth.radar.scene)."""
     return radar_scene.frames(scene, config, rng)
 
 

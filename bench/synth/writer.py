@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from bench.synth import photogrammetry
+from bench.synth.camera import photogrammetry
 from bench.synth.config import F_HIGH_GHZ, F_LOW_GHZ
 from bench.synth.meshes import indexed
 from methods.domain.capture import RadarGrid

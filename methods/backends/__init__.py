@@ -69,8 +69,8 @@ def correlate(signal, freqs_hz, tx_m, rx_m, points_m, *, sum_freqs: bool = False
     metres. C[f, p] = sum_{r,t} S[r,t,f] exp(+j 2 pi f (|p - rx_r| + |p - tx_t|) / c) / (n_rx n_tx).
     Precision against `correlate_reference` (relative): CPU and Warp float32 paths ~1e-5 (phases formed
     carefully); the CUDA default multiplies on tensor cores with fp16 inputs and fp32 accumulation, ~3e-4
-    (bounded by 1e-3 in the tests; notes/gpu.md explains why that is enough). The sum over frequencies is taken
-    on the host here (as the per-frequency output); `Backend.correlate_summed` takes it where the data lives.
+    (bounded by 1e-3 in the tests; docs/measurements/gpu.md explains why that is enough). The sum over frequencies is
+    taken on the host here (as the per-frequency output); `Backend.correlate_summed` takes it where the data lives.
     """
     out = backend_for(device).correlate(signal, freqs_hz, tx_m, rx_m, points_m)
     return out.sum(axis=0) if sum_freqs else out

@@ -14,8 +14,8 @@ rx steering x tx steering (separable, so 188 sincos per point instead of 8836).
 Error: linear interpolation of a tone at nu cycles per sample loses at most (pi nu)^2 / 2 at half-sample offsets;
 the profile's band reaches nu = 1 / (2 Q), so the worst-case amplitude error is pi^2 / (8 Q^2) = 0.12 % at Q = 32;
 measured ~5e-4 relative against the float64 direct sum on random frames (tests: RANGE_CPU_REL_TOL = 2e-3).
-Cost (measured, notes/gpu.md): ~4-7x less than the per-frequency BLAS sum at 128 frequencies on the 2-core CPU;
-it pays from ~16 frequencies on (`worth_it`).
+Cost (measured, docs/measurements/gpu.md): ~4-7x less than the per-frequency BLAS sum at 128 frequencies on the 2-core
+CPU; it pays from ~16 frequencies on (`worth_it`).
 
 Layout: points in chunks of CHUNK_POINTS, and in each chunk the pairs in blocks of RX_BLOCK receive rows, arrays
 ordered (rx, tx, point) so that one pair's samples for all points of a chunk are gathered together (one cache

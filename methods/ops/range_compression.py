@@ -70,7 +70,7 @@ def worth_it(freqs_hz: np.ndarray) -> bool:
     """The Warp backend's choice for a volume with method "auto": range compression with many frequencies.
 
     The numpy backend keeps the per-frequency BLAS sum for volumes; BP's depth search on the CPU uses the numpy
-    range-compressed gather of `methods.backends.cpu_range` instead (measured faster there, notes/gpu.md).
+    range-compressed gather of `methods.backends.cpu_range` instead (measured faster there, docs/measurements/gpu.md).
     """
     return len(freqs_hz) >= RANGE_MIN_FREQS and plan(freqs_hz) is not None
 

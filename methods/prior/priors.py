@@ -15,7 +15,8 @@ Delaunay triangulation of the rim of the covered region (`raster.fill_convex_hul
 across a hole as the paper's Delaunay of all pixels; 'scanline' interpolates linearly along each empty pixel's row
 and column between the nearest covered pixels (`raster.fill_scanline`): no triangulation, so a GPU kernel computes
 it exactly (Qhull's tie-breaks between cocircular lattice points set the Delaunay fill's values, and Qhull runs on
-the host only). Both reproduce a plane exactly; README "Hole fill" gives their measured cost and error.
+the host only). Both reproduce a plane exactly; docs/measurements/prior.md "Hole fill" gives their measured cost
+and error.
 
 `faithful=True` builds the prior as the reference code does (the faithful profile): it samples pixel (v, u) at
 MAROON's shifted position K^-1 (u + 0.5, v + 0.5) instead of the pixel centre (up to one pixel off at the far
@@ -41,7 +42,8 @@ from methods.prior.raster import fill_convex_hull, fill_scanline, rasterize_near
 
 DEFAULT_MAX_JUMP_MM = 10.0   # MAROON's triangulation threshold in optical spaces (MAROON_FORMAT.md 3.2, 5.2)
 FILLS = {"delaunay": fill_convex_hull, "scanline": fill_scanline}   # hole-fill rules (module doc)
-DEFAULT_FILL = "scanline"   # measured: same metrics as delaunay on the catalogue, no host Qhull (README "Hole fill")
+# measured: same metrics as delaunay on the catalogue, no host Qhull (docs/measurements/prior.md)
+DEFAULT_FILL = "scanline"
 
 
 def check_fill(fill: str) -> str:

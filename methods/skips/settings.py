@@ -4,14 +4,15 @@ Each skip evaluates less than the full grid and is measured against the full com
 `python -m bench.perf correlate --section skips` (time, speed-up, depth and metric change on every catalogue object).
 A skip
 is on by default (`default_for`, the `roi=auto` preset) only where its depth maps agree with the full computation
-within 0.1 mm on >= 99 % of the pixels valid in both and every metric within 1 % (notes/skips.md has the numbers).
+within 0.1 mm on >= 99 % of the pixels valid in both and every metric within 1 % (docs/measurements/skips.md has the
+numbers).
 
 * `mask_bb`: evaluate only the pixels inside the x/y bounds of the capture's metadata `mask_bb` (methods.skips.roi).
 * `mask_bb_depth`: ... and only depths inside its z bounds (BP searches no depth outside them; the other methods
   drop depths outside them). Not exact for two-frequency BP: a pixel whose strongest depth lies outside the box
   can have a weaker local peak inside it, which the full computation never reports (measured 98.2 % agreement on
   the plate); an object in front of the box holds the image maximum the filter is relative to; and a depth
-  dropped at the box's edge changes the metrics' triangulation of its in-box neighbours (notes/skips.md).
+  dropped at the box's edge changes the metrics' triangulation of its in-box neighbours (docs/measurements/skips.md).
 * `coarse_roi`: BP without a sensor prior evaluates only the object's pixels and depth range, bounded by a coarse
   pass on a pixel lattice (methods.skips.bp_search.coarse_roi) with the margins below.
 * `bp_coarse_to_fine`: BP searches each pixel's depth on a coarse step first and refines around the candidates;
@@ -79,7 +80,8 @@ PRESETS = ("none", "auto", "all")
 
 def default_for(method: str, n_freqs: int, dense_beats_search: bool = False) -> SkipSettings:
     """The skips on by default (`roi=auto`) for a method, frequency count and backend: those measured to agree with
-    the full computation on every catalogue object and to save time there (notes/skips.md, notes/gpu.md).
+    the full computation on every catalogue object and to save time there (docs/measurements/skips.md,
+    docs/measurements/gpu.md).
     `mask_bb_depth` stays off: cutting BP's depth search at the box moved 1.8 % of two-frequency BP's depths on the
     plate and, where an object lies in front of the box (the two objects at 30 cm: one at 25 cm, zmin 26 cm), it
     removes the image maximum, so the -14 dB filter keeps other pixels (BP_max metrics moved 48 %); for 2FSK, 3FSK
@@ -90,7 +92,7 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False) -> 
     d05 18.5 ms with `fsk_keep` against 9.9 ms; 3FSK 21.8 against 16.5 ms; two-frequency BP with the coarse ROI
     evaluated as the dense volume over its bounding box, bp._box_depth_m, 54.8 against 40.5 ms), so there only
     `mask_bb` stays on for them; BP with many frequencies keeps the coarse ROI and the search (145 against 519 ms,
-    notes/gpu.md)."""
+    docs/measurements/gpu.md)."""
     if method == "bp":
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True)

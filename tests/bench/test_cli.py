@@ -1,8 +1,9 @@
-"""Every README command and a table of user mistakes, through the real entry points (subprocesses).
+"""Every command the README and the guide show, and a table of user mistakes, through the real entry points
+(subprocesses).
 
-* README commands: `README_RUNS` maps each command the README shows (its ```bash blocks and the `python -m` /
-  `bash run.sh` spans of its prose) to what this test runs for it; `test_readme_commands_are_all_covered` fails
-  when the README and the map drift apart. Cheap commands run for real on the `synth_root` fixture or on copies of
+* Commands: `DOC_RUNS` maps each command that README.md and the pages of docs/guide/ show (their ```bash blocks and
+  the `python -m` / `bash run.sh` spans of their prose) to what this test runs for it;
+  `test_doc_commands_are_all_covered` fails when the pages and the map drift apart. Cheap commands run for real on the `synth_root` fixture or on copies of
   committed files; long ones (the demo, sweeps, the full benchmarks) run with `--help`, Hydra sweeps are composed
   with `--cfg all` (every group and launcher resolved, nothing run). Each must exit 0 without a traceback.
 * Mistakes: `MISTAKES` lists a command, the exit code and the one line it must print on stderr
@@ -32,11 +33,14 @@ STRESS_PRECISION = ["{py} -m bench.stress --precision-only --quick --out {tmp}/g
                     "cp -r {repo}/results/stress {tmp}/report",
                     "{py} -m bench.stress --add-precision {tmp}/gpu/precision.csv --out {tmp}/report",
                     "test -s {tmp}/report/summary.md"]
-# README command -> the commands run for it, in order. {py}: this interpreter, {synth}: the synth_root fixture,
-# {tmp}: an empty folder of this test, {repo}: the checkout.
+# command shown in README.md or docs/guide/*.md -> the commands run for it, in order. {py}: this interpreter,
+# {synth}: the synth_root fixture, {tmp}: an empty folder of this test, {repo}: the checkout.
 REPORT_RUN = ["cp -r {repo}/results/table3 {tmp}/table3", "{py} -m bench.report {tmp}/table3 --out {tmp}/report.html",
               "test -s {tmp}/report.html"]
-README_RUNS: dict[str, list[str]] = {
+# one run, for real (one capture, 2FSK: seconds); the MM-2FSK run is test_app's
+ONE_RUN = ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=2fsk freq=d05 "
+           "prior=none device=cpu store.dir=null hydra.run.dir={tmp}/run", "test -s {tmp}/run/results.csv"]
+DOC_RUNS: dict[str, list[str]] = {
     "bash run.sh demo": ["bash run.sh demo --help"],
     "bash run.sh test": ["bash run.sh test --help"],
     "bash run.sh setup": ["bash run.sh setup"],
@@ -47,6 +51,10 @@ README_RUNS: dict[str, list[str]] = {
         ["{py} -m bench.demo --help"],
     "bash run.sh demo --update-results": ["bash run.sh demo --update-results --help"],
     "python -m bench": ["{py} -m bench --help"],
+    # one run for real on one capture (MM-2FSK: seconds; without dataset.root it would generate data/synthetic)
+    ".venv/bin/python -m bench method=mm2fsk freq=d10 prior=realsense":
+        ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=mm2fsk freq=d10 "
+         "prior=realsense store.dir=null hydra.run.dir={tmp}/one", "test -s {tmp}/one/results.csv"],
     # sweeps take minutes: composed (experiment, cells, launcher) but not run
     ".venv/bin/python -m bench -m experiment=table2 hydra/launcher=local":
         ["{py} -m bench experiment=table2 hydra/launcher=local --cfg all"],
@@ -81,11 +89,11 @@ README_RUNS: dict[str, list[str]] = {
         ["{py} -m bench experiment=table3 hydra/launcher=submitit_local --cfg all"],
     r"python -m bench -m experiment=table2\|table3\|runtime [hydra/launcher=local\|slurm_cpu\|slurm_gpu\|submitit_local]":
         ["{py} -m bench experiment=runtime hydra/launcher=submitit_local --cfg all"],
-    # one run, for real (one capture, 2FSK: seconds); the MM-2FSK run is test_app's
+    ".venv/bin/python -m bench dataset=maroon dataset.root=data/synthetic dataset.captures=[01_plate/30] method=2fsk "
+    "freq=d05 prior=none hydra.run.dir=outputs/one": ONE_RUN,
     r"python -m bench dataset.root=DIR method=bp\|2fsk\|3fsk\|mm2fsk freq=CONFIG "
     r"prior=none\|realsense\|photogrammetry [device=cpu\|cuda] hydra.run.dir=OUT":
-        ["{py} -m bench dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] method=2fsk freq=d05 "
-         "prior=none device=cpu store.dir=null hydra.run.dir={tmp}/run", "test -s {tmp}/run/results.csv"],
+        ONE_RUN,
     ".venv/bin/python -m bench profile=faithful dataset=maroon dataset.root=/data/maroon method=mm2fsk freq=d10 "
     "prior=realsense":      # for real on one capture with 2FSK (seconds); the faithful rows say so
         ["{py} -m bench profile=faithful dataset=maroon dataset.root={synth} dataset.captures=[01_plate/30] "
@@ -107,8 +115,9 @@ README_RUNS: dict[str, list[str]] = {
          "{py} -m bench.report.merge {tmp}/sweep --table table3", "test -s {tmp}/sweep/table3.tex"],
     r"python -m bench.synth --out DIR [--preset realistic\|ideal] [--distances 30 40 50] [--objects ...] [--seed S]":
         ["{py} -m bench.synth --help"],     # generating takes ~15-60 s a capture; bench.synth runs in test_synth_*
+    "python -m bench.synth": ["{py} -m bench.synth --help"],
+    ".venv/bin/python -m bench.synth --out data/synthetic --preset realistic --distances 30": ["{py} -m bench.synth --help"],
     # the agreement report generates the catalogue and runs 19 cells (~15 min): its options are checked only
-    "python -m bench.report.agreement": ["{py} -m bench.report.agreement --help"],
     ".venv/bin/python -m bench.report.agreement": ["{py} -m bench.report.agreement --help"],
     ".venv/bin/python -m bench.report.agreement --ablation --no-tables": ["{py} -m bench.report.agreement --help"],
     ".venv/bin/python -m bench.report.agreement --from-results results --out /tmp/agreement":   # rows -> report, ~2 s
@@ -127,8 +136,6 @@ README_RUNS: dict[str, list[str]] = {
     ".venv/bin/python -m bench.perf fill --root data/synthetic":
         ["{py} -m bench.perf fill --help"],            # minutes on the CPU; its parts run in test_perf_fill
     "python -m bench.perf fill --root DIR": ["{py} -m bench.perf fill --help"],
-    "python -m bench -m experiment=table3 device=cuda hydra/launcher=basic":
-        ["{py} -m bench experiment=table3 device=cuda hydra/launcher=basic --cfg all"],
     ".venv/bin/python -m bench.perf stream [--device cpu|cuda] [--root DIR --capture OBJECT/DISTANCE]":
         ["{py} -m bench.perf stream --help"],          # generates a 10-frame sequence; runs in test_perf_stream
     ".venv/bin/python -m bench.perf overhead --root data/synthetic [--device cpu|cuda] [--grid paper]":
@@ -149,12 +156,14 @@ README_RUNS: dict[str, list[str]] = {
         ["{py} -m bench.perf memory --help"],
     # new frames of every capture, minutes on the CPU; test_perf_skips_gpu runs its parts
     ".venv/bin/python -m bench.perf skips-gpu --root data/synthetic --device cuda":
-        ["{py} -m bench.perf skips_gpu --help"],
+        ["{py} -m bench.perf skips-gpu --help"],
     ".venv/bin/python -m bench.perf skips-gpu --root data/synthetic --device cpu --cases bp_d05,bp_full "
-    "--variants auto": ["{py} -m bench.perf skips_gpu --help"],
-    r"python -m bench.perf correlate\|perf_frames\|perf_stream\|perf_sweep\|perf_overhead ... [--out DIR]":
-        ["{py} -m bench.perf correlate --help", "{py} -m bench.perf frames --help", "{py} -m bench.perf stream --help",
-         "{py} -m bench.perf sweep --help", "{py} -m bench.perf overhead --help"],
+    "--variants auto": ["{py} -m bench.perf skips-gpu --help"],
+    "python -m bench.perf": ["{py} -m bench.perf --help"],           # lists the benchmarks
+    "python -m bench.perf <name>": ["{py} -m bench.perf --help"],
+    r"python -m bench.perf correlate\|frames\|stream\|sweep\|overhead\|memory\|fill\|skips\|skips-gpu ... [--out DIR]":
+        [f"{{py}} -m bench.perf {name} --help"
+         for name in ("correlate", "frames", "stream", "sweep", "overhead", "memory", "fill", "skips", "skips-gpu")],
     "python -m bench.stress [--out DIR]": ["{py} -m bench.stress --help"],
     ".venv/bin/python -m bench.stress": ["{py} -m bench.stress --help"],
     ".venv/bin/python -m bench.stress --quick --out /tmp/stress": ["{py} -m bench.stress --help"],   # 30-40 s
@@ -247,8 +256,11 @@ MISTAKES = [
 HYDRA_MISTAKES = [("bench-key", "{py} -m bench devcie=cpu", "Could not override 'devcie'")]
 
 
-def readme_commands(text: str) -> set[str]:
-    """The commands the README shows: lines of its ```bash blocks (comments dropped) and the inline code spans of
+DOC_PAGES = [REPO / "README.md", *sorted((REPO / "docs" / "guide").glob("*.md"))]
+
+
+def doc_commands(text: str) -> set[str]:
+    """The commands a page shows: lines of its ```bash blocks (comments dropped) and the inline code spans of
     its prose that start with `python -m`, `.venv/bin/python -m` or `bash run.sh`, whitespace collapsed."""
     commands = set()
     for block in re.findall(r"```bash\n(.*?)```", text, re.S):
@@ -310,11 +322,11 @@ def _run_all(jobs: dict[str, list[str]], base: Path, request) -> dict[str, tuple
 
 
 @pytest.fixture(scope="module")
-def readme_results(request, tmp_path_factory):
-    wanted = _selected(request, "command") & set(README_RUNS)
+def doc_results(request, tmp_path_factory):
+    wanted = _selected(request, "command") & set(DOC_RUNS)
     if not _setup_done():
         wanted = {c for c in wanted if not c.startswith("bash run.sh")}
-    return _run_all({c: README_RUNS[c] for c in wanted}, tmp_path_factory.mktemp("readme"), request)
+    return _run_all({c: DOC_RUNS[c] for c in wanted}, tmp_path_factory.mktemp("docs"), request)
 
 
 @pytest.fixture(scope="module")
@@ -324,18 +336,19 @@ def mistake_results(request, tmp_path_factory):
     return _run_all(rows, tmp_path_factory.mktemp("mistakes"), request)
 
 
-def test_readme_commands_are_all_covered():
-    shown = readme_commands((REPO / "README.md").read_text())
-    unrun, stale = sorted(shown - set(README_RUNS)), sorted(set(README_RUNS) - shown)
-    assert not unrun, f"README commands this test does not run (add them to README_RUNS): {unrun}"
-    assert not stale, f"README_RUNS entries the README no longer shows: {stale}"
+def test_doc_commands_are_all_covered():
+    assert len(DOC_PAGES) > 5, "docs/guide/ has no pages"
+    shown = {command for page in DOC_PAGES for command in doc_commands(page.read_text(encoding="utf-8"))}
+    unrun, stale = sorted(shown - set(DOC_RUNS)), sorted(set(DOC_RUNS) - shown)
+    assert not unrun, f"commands of README.md and docs/guide/ this test does not run (add them to DOC_RUNS): {unrun}"
+    assert not stale, f"DOC_RUNS entries no page shows any more: {stale}"
 
 
-@pytest.mark.parametrize("command", sorted(README_RUNS))
-def test_readme_command_runs(command, readme_results):
-    if command not in readme_results:
+@pytest.mark.parametrize("command", sorted(DOC_RUNS))
+def test_doc_command_runs(command, doc_results):
+    if command not in doc_results:
         pytest.skip("bash run.sh would install its set-up first")
-    (code, stdout, stderr, ran), _ = readme_results[command]
+    (code, stdout, stderr, ran), _ = doc_results[command]
     assert code == 0, f"{ran}\n{stdout[-2000:]}\n{stderr[-2000:]}"
     assert "Traceback" not in stderr, stderr
 

@@ -110,7 +110,7 @@ def test_roi_settings():
     with pytest.raises(ValueError, match="roi must be one of"):
         resolve("most")
     assert ALL.only("fsk_keep") == dataclasses.replace(NONE, fsk_keep=True)
-    # Warp devices: the dense kernels beat the host-driven searches for few frequencies (notes/gpu.md)
+    # Warp devices: the dense kernels beat the host-driven searches for few frequencies (docs/measurements/gpu.md)
     assert resolve("auto", "bp", 2, True) == SkipSettings(mask_bb=True) == default_for("2fsk", 2, True)
     assert default_for("bp", 128, True).bp_coarse_to_fine and default_for("2fsk", 2, False).fsk_keep
     assert SkipSettings().lattice_px(0.001) == (3, 5) and SkipSettings().lattice_px(0.006)[0] == 1   # no lattice

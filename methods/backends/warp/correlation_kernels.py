@@ -12,7 +12,7 @@ One thread per point or voxel; points come from an (N, 3) array or from an x/y/z
 * `range_profiles` + `range_gather`: range-compressed back-projection (methods/ops/range_compression.py): profiles in
   fp16 over the path window the volume needs only (fits L2), Tx steering in registers in chunks of 16.
 * `volume_peak_depth`: BP's argmax + parabola over z of a (z, pixel) volume on the device.
-The measured alternatives of each kernel (versions, layouts, chunk sizes) are in notes/gpu.md.
+The measured alternatives of each kernel (versions, layouts, chunk sizes) are in docs/measurements/gpu.md.
 Phases use the same cancellation-free split as the numpy backend: |p - q| = |p| + e(p, q) with e in float32 and the
 common phase 2 k |p| in float64, reduced mod 2 pi.
 """

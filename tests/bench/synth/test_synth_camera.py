@@ -13,7 +13,7 @@ from bench.synth.materials import MATERIALS
 
 pytest.importorskip("open3d")
 
-from bench.synth import depth_camera  # noqa: E402  (needs Open3D)
+from bench.synth.camera import depth as depth_camera  # noqa: E402  (needs Open3D)
 from bench.synth.scenes import build_scene  # noqa: E402
 
 QUIET = dict(disparity_sigma_px=0.0, dropout_fraction=0.0)

@@ -9,7 +9,7 @@ import pytest
 from PIL import Image
 
 from bench.synth import SynthConfig, build_scene
-from bench.synth.depth_camera import _cast, nominal_pose
+from bench.synth.camera.depth import _cast, nominal_pose
 from bench.synth.meshes import indexed
 
 

@@ -10,7 +10,7 @@ import pytest
 from bench.synth.config import C_M_PER_S, EFFECTS, PRESETS, SynthConfig, preset
 from bench.synth.materials import MATERIALS
 from bench.synth.meshes import rotation_matrix
-from bench.synth.radar_model import (
+from bench.synth.radar.model import (
     channel_gains,
     leg_gains,
     point_amplitude,
@@ -44,7 +44,7 @@ def test_fresnel_reflection_and_transmission_of_the_materials():
 
 def _render(object_name: str, **overrides):
     pytest.importorskip("open3d")
-    from bench.synth import depth_camera
+    from bench.synth.camera import depth as depth_camera
     from bench.synth.scenes import build_scene
 
     config = dataclasses.replace(SynthConfig(), **{**NO_NOISE, **overrides})
@@ -73,7 +73,7 @@ def test_calibration_residual_shifts_the_prior_by_the_set_amount():
     """A pure translation of the camera by 3 mm moves the plate's back-projected points (with the nominal pose, as
     the reader does) by 3 mm; only the component along the plate's normal (z) changes its depth."""
     pytest.importorskip("open3d")
-    from bench.synth import depth_camera
+    from bench.synth.camera import depth as depth_camera
     from bench.synth.scenes import build_scene
 
     config = dataclasses.replace(SynthConfig(), extrinsic_error_mm=3.0, extrinsic_error_deg=0.0)
@@ -215,7 +215,7 @@ def test_point_amplitude_units_and_datasheet_noise_level():
 
 def test_mount_is_seen_but_is_not_ground_truth():
     pytest.importorskip("open3d")
-    from bench.synth import depth_camera
+    from bench.synth.camera import depth as depth_camera
     from bench.synth.scenes import build_scene
 
     scene = build_scene("03_sphere", 0.30)
@@ -269,7 +269,7 @@ def test_skipped_sideways_samples_change_the_frame_by_less_than_1e4():
     """radar_scene skips samples whose lobe gain towards every antenna is < 1e-2: the frame of a cylinder's flank
     with and without them agrees to 1e-4 of its peak."""
     from bench.maroon.antennas import load_antenna_array
-    from bench.synth import radar_scene
+    from bench.synth.radar import scene as radar_scene
     from bench.synth.sampling import SurfaceSamples
 
     antennas = load_antenna_array()
@@ -291,8 +291,8 @@ def test_skipped_sideways_samples_change_the_frame_by_less_than_1e4():
 def test_ground_truth_smoothing_rounds_edges_flattens_ripples_and_keeps_flat_faces():
     """MAROON's smoothed photogrammetry mesh (30 Laplacian steps): flat faces stay put, edges round off inward,
     ripples lose amplitude with every step, the mesh stays closed with its winding; 0 steps = the exact mesh."""
+    from bench.synth.camera.photogrammetry import smoothed_mesh
     from bench.synth.meshes import extrude_strip, indexed, triangle_normals
-    from bench.synth.photogrammetry import smoothed_mesh
 
     plate = extrude_strip(np.array([-0.06, 0.06]), [0.3, 0.3], [0.304, 0.304], 0.12)
     assert smoothed_mesh(plate, 0, 0) is plate
@@ -357,7 +357,7 @@ def test_dihedral_double_bounce_returns_from_the_corner_and_outshines_its_direct
     more by the double bounce than by its direct (single, quasi-specular) echo."""
     pytest.importorskip("open3d")
     from bench.maroon.antennas import load_antenna_array
-    from bench.synth import multipath
+    from bench.synth.radar import multipath
     from bench.synth.sampling import visible_samples
 
     antennas = load_antenna_array(all_elements=True)

@@ -13,7 +13,7 @@ from bench.maroon.antennas import load_antenna_array
 from bench.synth import SynthConfig, ensure_capture, generate_catalogue, simulate_frame
 from bench.synth import generate as generate_module
 from bench.synth.meshes import extrude_strip, indexed, triangle_normals
-from bench.synth.radar_model import noise_frame
+from bench.synth.radar.model import noise_frame
 from bench.synth.sampling import visible_samples
 from bench.synth.scenes import FULL_CATALOGUE, build_scene
 from methods.domain.capture import RadarGrid
@@ -219,7 +219,7 @@ def test_expected_files_exist(tmp_path):
     expected = {"metadata.json", "alignment.json", "radar_72.0_82.0_16/calibration.json",
                 "realsense/calibration.json", "realsense/timestamps.txt",
                 "photogrammetry/mesh_masked_smoothed.obj",
-                # what MAROON's reference loader looks for beside our ground truth (bench/synth/photogrammetry.py)
+                # what MAROON's reference loader looks for beside our ground truth (synth/camera/photogrammetry.py)
                 "photogrammetry/mesh_masked.obj", "photogrammetry/cams.xml",
                 "photogrammetry/depth/synthetic_cam0.tif", "photogrammetry/rgb/synthetic_cam0.jpg"}
     for i in ("000000", "000001"):

@@ -26,7 +26,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from bench.synth.meshes import indexed
-from bench.synth.radar_model import CHUNK_POINTS, PARTIAL_SUMS, RESEED_STEPS, exact_phasors
+from bench.synth.radar.model import CHUNK_POINTS, PARTIAL_SUMS, RESEED_STEPS, exact_phasors
 from bench.synth.sampling import SurfaceSamples
 
 LOBE_CUTOFF = 1e-2      # as radar_scene.LOBE_CUTOFF

@@ -11,10 +11,10 @@ from collections.abc import Iterator
 import numpy as np
 
 from bench.maroon.antennas import load_antenna_array
-from bench.synth import multipath
 from bench.synth.config import SynthConfig, frequencies_hz
 from bench.synth.materials import MATERIALS
-from bench.synth.radar_model import (
+from bench.synth.radar import multipath
+from bench.synth.radar.model import (
     channel_gains,
     clutter_frame,
     leg_gains,
@@ -80,7 +80,7 @@ def object_frame(scene: Scene, config: SynthConfig, antennas, freqs, rng) -> np.
     front = visible_samples(part_tris, config.sample_spacing_m)
     frame = _simulate(front, material_amplitudes(front, reflection, config),
                       roughen_by_part(front, roughness_m, rng), lobe_rad, config, antennas, freqs)
-    if config.multipath:          # second order: object parts and object and mount (bench.synth.multipath)
+    if config.multipath:          # second order: object parts and object and mount (bench.synth.radar.multipath)
         lobes = lobe_rad if lobe_rad is not None else np.full(len(materials), np.pi)
         antennas_m = np.concatenate([antennas.rx_m, antennas.tx_m])
         pairs = multipath.bounce_pairs(part_tris, front, reflection, lobes, antennas_m)
