@@ -48,7 +48,7 @@ def test_the_catalogue_spans_the_papers_categories():
 
 def test_every_object_is_seen_by_the_camera_at_30_cm():
     pytest.importorskip("open3d")
-    from bench.synth import depth_camera
+    from bench.synth.camera import depth as depth_camera
     from bench.synth.config import SynthConfig
 
     config = SynthConfig(depth_noise=False)
