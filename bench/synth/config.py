@@ -80,7 +80,7 @@ class SynthConfig:
     scattering: str = "cosine"               # "cosine": area * cos^q law; "specular": lobe around the mirror direction
     element_exponent: float = 0.0            # element pattern cos(theta)^q (amplitude, per antenna, off the +z axis)
     transmission: bool = False               # back walls of partly transmissive parts (plastic shells) scatter too
-    multipath: bool = False                  # second-order echoes (object parts, object and mount); opt-in: cost
+    multipath: bool = False                  # second-order echoes (object parts, object and mount)
     channel_amplitude_db: float = 0.0        # per-channel (tx and rx) calibration residual, std of the gain in dB
     channel_phase_deg: float = 0.0           # ... and of the phase in degrees
     clutter_model: str = "points"            # "points": today's point clutter; "scene": wall image + the object's mount
@@ -190,9 +190,10 @@ EFFECTS: dict[str, dict] = {
     "camera contiguous holes": {"camera_holes": False},
     "camera IR multipath": {"ir_multipath": False},
     "camera segmentation mask": {"mask_errors": False},
+    "second-order multipath": {"multipath": False},
 }
-# Effects modelled but off in the realistic preset (cost), with the settings that switch them on.
-OPT_IN_EFFECTS: dict[str, dict] = {"second-order multipath": {"multipath": True}}
+# Effects modelled but off in the realistic preset, with the settings that switch them on (none today).
+OPT_IN_EFFECTS: dict[str, dict] = {}
 
 PRESETS: dict[str, SynthConfig] = {
     "ideal": SynthConfig(),
@@ -203,7 +204,8 @@ PRESETS: dict[str, SynthConfig] = {
         wall_distance_m=2.0, mount=True, noise_model="datasheet", amplitude_scale=PLATE_AMPLITUDE_SCALE,
         gt_registration_mm=1.0, gt_registration_deg=0.2, gt_smoothing_steps=30, gt_mesh_subdivisions=1,
         extrinsic_tail_dof=3.0, depth_focal_px=D435_DEPTH_FOCAL_PX, noise_angle_exponent=1.0,
-        min_depth_m=D435_MIN_Z_M, edge_ramp=True, camera_holes=True, ir_multipath=True, mask_errors=True),
+        min_depth_m=D435_MIN_Z_M, edge_ramp=True, camera_holes=True, ir_multipath=True, mask_errors=True,
+        multipath=True),
 }
 DEFAULT_PRESET = "realistic"     # of the demo, the Hydra app and the committed results
 
