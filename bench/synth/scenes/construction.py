@@ -42,9 +42,9 @@ def plasterboard(d_m: float) -> tuple[Part, ...]:
 
 
 def rebar_mesh(d_m: float) -> tuple[Part, ...]:
-    """Three vertical 6 mm bars in front of three horizontal ones, 4 cm apart."""
-    vertical = tuple(box((x - 0.003, x + 0.003), (-0.06, 0.06), (d_m, d_m + 0.006)) for x in (-0.04, 0.0, 0.04))
-    horizontal = tuple(box((-0.06, 0.06), (y - 0.003, y + 0.003), (d_m + 0.006, d_m + 0.012))
+    """Three vertical 10 mm bars in front of three horizontal ones, 4 cm apart."""
+    vertical = tuple(box((x - 0.005, x + 0.005), (-0.06, 0.06), (d_m, d_m + 0.01)) for x in (-0.04, 0.0, 0.04))
+    horizontal = tuple(box((-0.06, 0.06), (y - 0.005, y + 0.005), (d_m + 0.01, d_m + 0.02))
                        for y in (-0.04, 0.0, 0.04))
     return tuple(Part(bar, 1.0, (110, 90, 80), "metal") for bar in vertical + horizontal)
 
