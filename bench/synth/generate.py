@@ -27,7 +27,7 @@ from bench.synth.camera import photogrammetry
 from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
 from bench.synth.meshes import rotation_matrix
 from bench.synth.radar import scene as radar_scene
-from bench.synth.scenes import CATALOGUE, build_scene
+from bench.synth.scenes import CATALOGUE, FULL_CATALOGUE, build_scene
 
 MANIFEST_NAME = ownership.MANIFEST_NAME
 DEFAULT_DISTANCES_CM = (30, 40, 50)
@@ -143,8 +143,8 @@ def _remove_stale_temporaries(object_dir: Path, distance_cm: int) -> None:
 def _check(object_name: str, distance_cm: int, config: SynthConfig) -> None:
     config.validate()
     motion.validate(config)
-    if object_name not in CATALOGUE:
-        raise ValueError(f"unknown object {object_name!r}; known: {', '.join(CATALOGUE)}")
+    if object_name not in FULL_CATALOGUE:
+        raise ValueError(f"unknown object {object_name!r}; known: {', '.join(FULL_CATALOGUE)}")
     if not DISTANCE_RANGE_CM[0] <= int(distance_cm) <= DISTANCE_RANGE_CM[1]:
         raise ValueError(f"distance {distance_cm} cm is outside {DISTANCE_RANGE_CM[0]}..{DISTANCE_RANGE_CM[1]} cm")
 
@@ -208,7 +208,7 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
                        config: SynthConfig = DEFAULT_CONFIG, force: bool = False,
                        log: Callable[[CaptureResult], None] | None = None,
                        on_wait: Callable[[], None] | None = None) -> list[CaptureResult]:
-    """Ensure every (object, distance) capture; `objects=None` means the whole catalogue.
+    """Ensure every (object, distance) capture; `objects=None` means the demo's catalogue (scenes.CATALOGUE).
 
     Holds the root's lock throughout: a concurrent call waits (`on_wait()` is called once when it has to) and
     then finds the captures cached. Raises ownership.ForeignRootError for a root with other data.
