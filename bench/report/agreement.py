@@ -1,4 +1,5 @@
-"""`python -m bench.report.agreement [--preset realistic] [--out DIR] [--objects ...] [--cells ...] [--ablation]`:
+"""`python -m bench.report.agreement [--preset realistic] [--out DIR] [--catalogue demo|full] [--objects ...]
+[--cells ...] [--ablation]`:
 how far the synthetic benchmark is from the paper's real-data Tables II and III.
 
 1. Generates the catalogue at 30 cm with the preset (bench.synth; cached under `--out`/data/<preset>), runs every
@@ -527,7 +528,7 @@ def _read_rows(path: Path) -> pd.DataFrame | None:
 
 
 def main() -> int:
-    from bench.synth import CATALOGUE
+    from bench.synth import CATALOGUES, FULL_CATALOGUE
     from bench.synth.config import PRESETS, preset
 
     parser = cli.ArgumentParser(prog="python -m bench.report.agreement", description=__doc__,
@@ -537,11 +538,13 @@ def main() -> int:
                         help="the generator's seed (noise, residuals, clutter draws; default: the preset's, 0)")
     parser.add_argument("--out", type=Path, default=Path("outputs/agreement"))
     parser.add_argument("--store", type=Path, default=Path("outputs/store"), help="result store; 'none' for none")
-    parser.add_argument("--objects", nargs="+", default=list(CATALOGUE), choices=list(CATALOGUE))
+    parser.add_argument("--catalogue", choices=list(CATALOGUES), default="demo",
+                        help="the objects of --objects and --ablation-objects when not given: demo (8) or full (27)")
+    parser.add_argument("--objects", nargs="+", default=None, choices=list(FULL_CATALOGUE))
     parser.add_argument("--cells", nargs="+", default=None,
                         help="subset of the Tables II/III cells, e.g. mm2fsk_d10 mm2fsk_d10@photogrammetry")
     parser.add_argument("--ablation", action="store_true", help="also the one-effect-off table")
-    parser.add_argument("--ablation-objects", nargs="+", default=list(CATALOGUE), choices=list(CATALOGUE))
+    parser.add_argument("--ablation-objects", nargs="+", default=None, choices=list(FULL_CATALOGUE))
     parser.add_argument("--ablation-cells", nargs="+", default=list(ABLATION_CELLS))
     parser.add_argument("--no-tables", action="store_true", help="only the ablation")
     parser.add_argument("--from-results", type=Path, metavar="DIR",
@@ -556,6 +559,8 @@ def main() -> int:
     parser.add_argument("--profiles", nargs="+", choices=list(PROFILES), default=list(PROFILES),
                         help="metric profiles to run the cells under (default: both, side by side)")
     args = parser.parse_args()
+    args.objects = args.objects or list(CATALOGUES[args.catalogue])
+    args.ablation_objects = args.ablation_objects or list(CATALOGUES[args.catalogue])
     all_cells = [f"mm2fsk_{f}@photogrammetry" for f in PAPER_TABLE2] + list(PAPER_TABLE3) + [BASELINE_CELL]
     cells = all_cells if args.cells is None else args.cells
     unknown = [c for c in cells + args.ablation_cells if c not in all_cells]

@@ -1,16 +1,16 @@
 """Synthetic MAROON-format captures: physically modelled MIMO radar frames, RealSense-like depth, ground truth.
 
 Public API: `simulate_frame` (point scatterers -> frame), `generate_capture`, `generate_catalogue`,
-`SynthConfig`, `CATALOGUE`. See bench/synth/README.md.
+`SynthConfig`, `CATALOGUE` (the demo's objects), `FULL_CATALOGUE`, `CATALOGUES`. See bench/synth/README.md.
 """
 from bench.synth.config import SynthConfig
 from bench.synth.radar.model import simulate_frame
-from bench.synth.scenes import CATALOGUE, build_scene
+from bench.synth.scenes import CATALOGUE, CATALOGUES, FULL_CATALOGUE, build_scene
 
 _NEED_OPEN3D = {"CaptureResult", "ensure_capture", "generate_capture", "generate_catalogue"}
 
-__all__ = ["CATALOGUE", "CaptureResult", "SynthConfig", "build_scene", "ensure_capture", "generate_capture",
-           "generate_catalogue", "simulate_frame"]
+__all__ = ["CATALOGUE", "CATALOGUES", "FULL_CATALOGUE", "CaptureResult", "SynthConfig", "build_scene", "ensure_capture",
+           "generate_capture", "generate_catalogue", "simulate_frame"]
 
 
 def __getattr__(name: str):

@@ -1,5 +1,5 @@
 """Command line: `python -m bench.synth --out DIR [--preset realistic|ideal] [--distances 30 40 50] [--objects ...]
-[--frames N] [--motion static|lateral|approach] [--motion-speed M_S]
+[--catalogue demo|full] [--frames N] [--motion static|lateral|approach] [--motion-speed M_S]
 [--snr-db X] [--seed S] [--no-clutter] [--force]`. Prints one line per capture; bad arguments or an output folder
 that cannot be written give a one-line error and exit code 2 (bench.cli)."""
 from __future__ import annotations
@@ -14,7 +14,7 @@ from bench.synth.config import DEFAULT_PRESET, DISTANCE_RANGE_CM, PRESETS, Synth
 from bench.synth.generate import DEFAULT_DISTANCES_CM, CaptureResult, generate_catalogue
 from bench.synth.motion import MOTIONS
 from bench.synth.motion import validate as validate_motion
-from bench.synth.scenes import CATALOGUE
+from bench.synth.scenes import CATALOGUES, FULL_CATALOGUE
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -23,7 +23,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--preset", choices=list(PRESETS), default=DEFAULT_PRESET,
                    help="generator settings: realistic (the effects of real data) or ideal (exact physics)")
     p.add_argument("--distances", type=int, nargs="+", default=list(DEFAULT_DISTANCES_CM), help="centimetres")
-    p.add_argument("--objects", nargs="+", default=None, help=f"subset of: {' '.join(CATALOGUE)}")
+    p.add_argument("--catalogue", choices=list(CATALOGUES), default="demo",
+                   help="demo: the demo's 8 objects; full: every object of bench/synth/README.md's catalogue")
+    p.add_argument("--objects", nargs="+", default=None,
+                   help=f"subset of the full catalogue (instead of --catalogue): {' '.join(FULL_CATALOGUE)}")
     p.add_argument("--frames", type=cli.positive_int, default=SynthConfig.frames)
     p.add_argument("--motion", choices=list(MOTIONS), default=SynthConfig.motion,
                    help="trajectory of the object over the frames (bench/synth/motion.py)")
@@ -39,9 +42,10 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
-    unknown = [o for o in (args.objects or []) if o not in CATALOGUE]
+    unknown = [o for o in (args.objects or []) if o not in FULL_CATALOGUE]
     if unknown:
-        parser.error(f"unknown object(s) {', '.join(unknown)}; known: {', '.join(CATALOGUE)}")
+        parser.error(f"unknown object(s) {', '.join(unknown)}; known: {', '.join(FULL_CATALOGUE)}")
+    objects = args.objects or list(CATALOGUES[args.catalogue])
     lo, hi = DISTANCE_RANGE_CM
     bad = [d for d in args.distances if not lo <= d <= hi]
     if bad:
@@ -58,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from bench.progress import bar
 
-    progress = bar(len(args.objects or CATALOGUE) * len(args.distances), "captures", unit="capture")
+    progress = bar(len(objects) * len(args.distances), "captures", unit="capture")
 
     def log(result: CaptureResult) -> None:
         progress.write(f"{result.status:9s} {result.path}  {result.seconds:6.2f} s", file=sys.stdout)
@@ -67,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     try:
         with progress:
-            results = generate_catalogue(args.out, args.distances, args.objects, config, args.force, log)
+            results = generate_catalogue(args.out, args.distances, objects, config, args.force, log)
     except OSError as err:
         raise cli.UserError(args.out, f"cannot write the dataset there ({err.strerror or err})") from None
     generated = sum(r.status == "generated" for r in results)

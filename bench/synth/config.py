@@ -18,7 +18,7 @@ from methods.domain.radar import C_M_PER_S, MAROON_F_HIGH_GHZ, MAROON_F_LOW_GHZ,
 GENERATOR_VERSION = "8"          # bump when the generator's output changes for an unchanged config
 F_LOW_GHZ, F_HIGH_GHZ = MAROON_F_LOW_GHZ, MAROON_F_HIGH_GHZ
 QUARTER_WAVELENGTH_M = C_M_PER_S / (F_HIGH_GHZ * 1e9) / 4.0   # 0.914 mm at 82 GHz
-DISTANCE_RANGE_CM = (20, 70)   # objects stay in front of the clutter region and the 1 m wall
+DISTANCE_RANGE_CM = (20, 60)   # every catalogue part inside the radar volume and MAROON's mask_bb (zmax 0.70 m)
 
 
 @dataclass(frozen=True)
@@ -63,12 +63,24 @@ class SynthConfig:
     flying_pixel_fraction: float = 0.3       # share of the edge band given a depth between the two sides
     slant_bias_px: float = 0.0               # disparity bias * tan(incidence): depth bias on slanted surfaces
     depth_scale_error: float = 0.0           # camera depth reads (1 + this) x the true Z (data sheet: |error| <= 2 %)
+    extrinsic_tail_dof: float = 0.0          # 0: calibration error of exactly the set size; > 0: per-axis Student-t
+    depth_focal_px: float = 0.0              # focal length of the stereo pair (px); 0: focal_px (colour-aligned)
+    noise_angle_exponent: float = 0.0        # disparity noise grows as 1 / cos(incidence)^this
+    min_depth_m: float = 0.0                 # no depth nearer than this (the stereo search range's min-Z)
+    edge_ramp: bool = False                  # mixed pixels across depth edges as the window's ramp (not random)
+    camera_holes: bool = False               # contiguous holes: specular highlights and dark (IR-absorbing) parts
+    hole_correlation_px: float = 4.0         # size of the blobs of the random field that shapes those holes
+    ir_return_floor: float = 0.05            # albedo * cos(inc) * (0.3 m / Z)^2 below this: no match (dark holes)
+    ir_multipath: bool = False               # mirrored infrared inside concave objects (virtual-image depth)
+    mask_errors: bool = False                # segmentation mask as a segmenter draws it (shift, bleed, erosion)
+    mask_shift_px: float = 1.0               # misregistration of the mask against the depth, per capture
+    mask_bleed_px: int = 1                   # mask spreads onto the background by this many pixels
     # radar
     radar_materials: bool = False            # Fresnel reflection and roughness of each part's material (materials.py)
     scattering: str = "cosine"               # "cosine": area * cos^q law; "specular": lobe around the mirror direction
     element_exponent: float = 0.0            # element pattern cos(theta)^q (amplitude, per antenna, off the +z axis)
     transmission: bool = False               # back walls of partly transmissive parts (plastic shells) scatter too
-    multipath: bool = False                  # second-order echoes (object parts, object and mount); opt-in: cost
+    multipath: bool = False                  # second-order echoes (object parts, object and mount)
     channel_amplitude_db: float = 0.0        # per-channel (tx and rx) calibration residual, std of the gain in dB
     channel_phase_deg: float = 0.0           # ... and of the phase in degrees
     clutter_model: str = "points"            # "points": today's point clutter; "scene": wall image + the object's mount
@@ -109,6 +121,11 @@ class SynthConfig:
                  self.gt_registration_mm, self.gt_registration_deg) >= 0, "effect strengths must be >= 0"),
             (0 <= self.wall_reflection <= 1, "wall_reflection must be in [0, 1]"),
             (self.amplitude_scale > 0 and self.if_bandwidth_hz > 0, "amplitude_scale and if_bandwidth_hz must be > 0"),
+            (min(self.extrinsic_tail_dof, self.depth_focal_px, self.noise_angle_exponent, self.min_depth_m,
+                 self.mask_shift_px, self.mask_bleed_px, self.ir_return_floor) >= 0
+             and self.hole_correlation_px > 0, "camera error settings must be >= 0"),
+            (self.extrinsic_tail_dof == 0 or self.extrinsic_tail_dof > 2,
+             "extrinsic_tail_dof must be 0 (fixed size) or > 2 (a Student-t with a finite variance)"),
             (self.gt_smoothing_steps >= 0 and 0 <= self.gt_mesh_subdivisions <= 2,
              "gt_smoothing_steps must be >= 0 and gt_mesh_subdivisions in 0..2"),
         ]
@@ -143,6 +160,12 @@ PLATE_REFERENCE_DISTANCE_M = 0.30
 # unity; our unscaled model gives a large plate |s| = lambda / (2 R) (its image source), hence this factor (~154).
 PLATE_AMPLITUDE_SCALE = 2.0 * PLATE_REFERENCE_DISTANCE_M / (C_M_PER_S / (0.5 * (F_LOW_GHZ + F_HIGH_GHZ) * 1e9))
 
+# D435 in Intel's recommended 848 x 480 depth mode (MAROON does not state its mode): the stereo pair's focal length
+# from the data sheet's 87 deg horizontal field of view, and its min-Z, which scales with the horizontal resolution
+# (tuning guide), from the data sheet's ~0.28 m at 1280 x 720.
+D435_DEPTH_FOCAL_PX = 424.0 / float(np.tan(np.radians(87.0 / 2)))          # 447 px
+D435_MIN_Z_M = 0.28 * 848 / 1280                                          # 0.186 m
+
 # Every effect of the realistic preset, with the settings that switch it off (back to the ideal generator's).
 EFFECTS: dict[str, dict] = {
     "camera calibration residual": {"extrinsic_error_mm": 0.0, "extrinsic_error_deg": 0.0},
@@ -160,9 +183,17 @@ EFFECTS: dict[str, dict] = {
     "datasheet noise": {"noise_model": "snr"},
     "ground-truth registration": {"gt_registration_mm": 0.0, "gt_registration_deg": 0.0},
     "ground-truth smoothing": {"gt_smoothing_steps": 0, "gt_mesh_subdivisions": 0},
+    "camera calibration tail": {"extrinsic_tail_dof": 0.0},
+    "camera noise model": {"depth_focal_px": 0.0, "noise_angle_exponent": 0.0},
+    "camera minimum range": {"min_depth_m": 0.0},
+    "camera edge ramps": {"edge_ramp": False},
+    "camera contiguous holes": {"camera_holes": False},
+    "camera IR multipath": {"ir_multipath": False},
+    "camera segmentation mask": {"mask_errors": False},
+    "second-order multipath": {"multipath": False},
 }
-# Effects modelled but off in the realistic preset (cost), with the settings that switch them on.
-OPT_IN_EFFECTS: dict[str, dict] = {"second-order multipath": {"multipath": True}}
+# Effects modelled but off in the realistic preset, with the settings that switch them on (none today).
+OPT_IN_EFFECTS: dict[str, dict] = {}
 
 PRESETS: dict[str, SynthConfig] = {
     "ideal": SynthConfig(),
@@ -171,7 +202,10 @@ PRESETS: dict[str, SynthConfig] = {
         slant_bias_px=0.3, depth_scale_error=0.01, radar_materials=True, scattering="specular", element_exponent=1.0,
         transmission=True, channel_amplitude_db=0.5, channel_phase_deg=5.0, clutter_model="scene",
         wall_distance_m=2.0, mount=True, noise_model="datasheet", amplitude_scale=PLATE_AMPLITUDE_SCALE,
-        gt_registration_mm=1.0, gt_registration_deg=0.2, gt_smoothing_steps=30, gt_mesh_subdivisions=1),
+        gt_registration_mm=1.0, gt_registration_deg=0.2, gt_smoothing_steps=30, gt_mesh_subdivisions=1,
+        extrinsic_tail_dof=3.0, depth_focal_px=D435_DEPTH_FOCAL_PX, noise_angle_exponent=1.0,
+        min_depth_m=D435_MIN_Z_M, edge_ramp=True, camera_holes=True, ir_multipath=True, mask_errors=True,
+        multipath=True),
 }
 DEFAULT_PRESET = "realistic"     # of the demo, the Hydra app and the committed results
 

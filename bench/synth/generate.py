@@ -30,7 +30,7 @@ from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, cap
 from bench.synth.meshes import rotation_matrix
 from bench.synth.radar import scene as radar_scene
 from bench.synth.radar.leg_sum import PARTIAL_SUMS, single_threaded_blas
-from bench.synth.scenes import CATALOGUE, build_scene
+from bench.synth.scenes import CATALOGUE, FULL_CATALOGUE, build_scene
 
 MANIFEST_NAME = ownership.MANIFEST_NAME
 DEFAULT_DISTANCES_CM = (30, 40, 50)
@@ -152,8 +152,8 @@ def _remove_stale_temporaries(object_dir: Path, distance_cm: int) -> None:
 def _check(object_name: str, distance_cm: int, config: SynthConfig) -> None:
     config.validate()
     motion.validate(config)
-    if object_name not in CATALOGUE:
-        raise ValueError(f"unknown object {object_name!r}; known: {', '.join(CATALOGUE)}")
+    if object_name not in FULL_CATALOGUE:
+        raise ValueError(f"unknown object {object_name!r}; known: {', '.join(FULL_CATALOGUE)}")
     if not DISTANCE_RANGE_CM[0] <= int(distance_cm) <= DISTANCE_RANGE_CM[1]:
         raise ValueError(f"distance {distance_cm} cm is outside {DISTANCE_RANGE_CM[0]}..{DISTANCE_RANGE_CM[1]} cm")
 
@@ -217,7 +217,7 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
                        config: SynthConfig = DEFAULT_CONFIG, force: bool = False,
                        log: Callable[[CaptureResult], None] | None = None,
                        on_wait: Callable[[], None] | None = None) -> list[CaptureResult]:
-    """Ensure every (object, distance) capture; `objects=None` means the whole catalogue.
+    """Ensure every (object, distance) capture; `objects=None` means the demo's catalogue (scenes.CATALOGUE).
 
     Holds the root's lock throughout: a concurrent call waits (`on_wait()` is called once when it has to) and
     then finds the captures cached. Builds `capture_workers()` captures at once (threads; every capture draws from

@@ -15,6 +15,19 @@ surface, so the stereo match lies behind it (`subsurface_bias_m`: 6 mm for white
 Sensors 22(19) 7378, 2022, measure RealSense depth on translucent objects several mm to cm behind the surface);
 specular metal reflects the pattern away (holes,
 `dropout_fraction`) or mirrors other surfaces (outliers, `outlier_fraction`); dark and matte surfaces behave.
+Construction materials (radar): brick 3.91 (ITU-R P.2040-3 Table 3, stated for 1-40 GHz: extrapolated), concrete
+5.24 and plasterboard 2.73 (both stated for 1-100 GHz); opaque and black plastics take PE/PP's 2.35.
+Camera, the errors of the realistic preset's camera (bench/synth/README.md, "Depth camera errors"):
+* `ir_albedo`: diffuse reflectance at 850 nm; carbon-black pigmented plastic absorbs the near infrared (~0.05, the
+  reason black plastics defeat NIR sorting in recycling), other surfaces 0.3-0.8. Weak returns give contiguous holes.
+* `highlight_deg`: half-angle around the mirror direction of the projector within which a glossy surface sends the
+  IR pattern straight back and saturates the sensor (a contiguous hole, Intel's D400 tuning guide: "specular
+  surfaces"); polished/brushed metal 10 deg, glossy plastic 4 deg, matte 0.
+* `ir_mirror`: share of the infrared returned specularly: a pixel on a surface that mirrors another part of the scene
+  (a concave object: pan, dihedral) sees that part's pattern behind the mirror (the virtual image, depth + hop) with
+  this weight; metal 1 (mirror), glossy plastic 0.15, matte 0.
+* `mask_erosion_px`: the segmentation (MAROON: Grounded-SAM on the colour image) loses this many pixels along the
+  boundary of dark or shiny parts, whose edges have little contrast against a dark background.
 The numbers are stated here once and every effect can be switched off in `SynthConfig`.
 """
 from __future__ import annotations
@@ -35,6 +48,10 @@ class Material:
     dropout_fraction: float        # camera pixels lost to specular reflection of the IR pattern
     outlier_fraction: float        # camera pixels that see a mirrored surface: depth off by several cm
     walls_transmit: bool = False   # thin walls with little loss: the far wall shows through (not metal, not solid wood)
+    ir_albedo: float = 0.6         # diffuse reflectance at 850 nm (camera holes on dark surfaces)
+    highlight_deg: float = 0.0     # specular highlight half-angle: pattern saturates, contiguous hole
+    ir_mirror: float = 0.0         # weight of the mirrored pattern (IR multipath inside concave objects)
+    mask_erosion_px: int = 0       # segmentation mask pulled in along this part's boundary
 
     @property
     def reflection(self) -> float:
@@ -53,9 +70,17 @@ class Material:
 
 
 MATERIALS: dict[str, Material] = {
-    "metal": Material(None, 0.02e-3, 15.0, 0.0, 0.05, 0.01),
-    "plastic": Material(2.35, 0.05e-3, 15.0, 6e-3, 0.01, 0.0, True),
-    "wood": Material(1.99, 0.2e-3, 25.0, 0.5e-3, 0.0, 0.0),
-    "cardboard": Material(1.9, 0.3e-3, 30.0, 0.5e-3, 0.0, 0.0, True),
-    "foam": Material(1.03, 0.5e-3, 40.0, 1.5e-3, 0.0, 0.0, True),
+    "metal": Material(None, 0.02e-3, 15.0, 0.0, 0.05, 0.01, ir_albedo=0.5, highlight_deg=10.0, ir_mirror=1.0,
+                      mask_erosion_px=2),
+    "plastic": Material(2.35, 0.05e-3, 15.0, 6e-3, 0.01, 0.0, True, ir_albedo=0.8, highlight_deg=4.0, ir_mirror=0.15),
+    "opaque_plastic": Material(2.35, 0.05e-3, 15.0, 0.0, 0.0, 0.0, True, ir_albedo=0.7, highlight_deg=4.0,
+                               ir_mirror=0.15),
+    "black_plastic": Material(2.35, 0.05e-3, 15.0, 0.0, 0.0, 0.0, True, ir_albedo=0.05, highlight_deg=4.0,
+                              ir_mirror=0.15, mask_erosion_px=2),
+    "wood": Material(1.99, 0.2e-3, 25.0, 0.5e-3, 0.0, 0.0, ir_albedo=0.6),
+    "cardboard": Material(1.9, 0.3e-3, 30.0, 0.5e-3, 0.0, 0.0, True, ir_albedo=0.7),
+    "foam": Material(1.03, 0.5e-3, 40.0, 1.5e-3, 0.0, 0.0, True, ir_albedo=0.9),
+    "brick": Material(3.91, 0.5e-3, 40.0, 0.0, 0.0, 0.0, ir_albedo=0.4),
+    "concrete": Material(5.24, 0.5e-3, 40.0, 0.0, 0.0, 0.0, ir_albedo=0.5),
+    "plasterboard": Material(2.73, 0.3e-3, 30.0, 0.5e-3, 0.0, 0.0, ir_albedo=0.8),
 }

@@ -144,6 +144,7 @@ DOC_RUNS: dict[str, list[str]] = {
         ["{py} -m bench.report.agreement --help"],
     # regenerating results/: the demo and the faithful sweeps take minutes to hours; their options are checked
     ".venv/bin/python -m bench.demo --update-results": ["{py} -m bench.demo --help"],
+    "python -m bench.report.merge ROOT": ["{py} -m bench.report.merge --help"],   # merges run in test_sweep_report
     ".venv/bin/python -m bench -m experiment=table2 profile=faithful hydra/launcher=basic hydra.sweep.dir=outputs/faithful/table2":
         ["{py} -m bench experiment=table2 profile=faithful hydra/launcher=basic --cfg job"],
     ".venv/bin/python -m bench -m experiment=table3 profile=faithful hydra/launcher=basic hydra.sweep.dir=outputs/faithful/table3":

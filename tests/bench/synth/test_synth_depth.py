@@ -42,7 +42,7 @@ def test_rays_follow_integer_pixel_backprojection(object_name):
     a +0.5 pixel convention would miss by ~100 um on these slanted surfaces."""
     config = SynthConfig()
     scene, pose = build_scene(object_name, 0.3), nominal_pose(config)
-    z_m, _, geometry = _cast(scene, pose, config)
+    z_m, _, geometry, _ = _cast(scene, pose, config)
     v, u = np.nonzero(geometry == 0)
     cx, cy = config.principal_point_px
     cam = np.column_stack([(u - cx) / config.focal_px, (v - cy) / config.focal_px, np.ones(len(u))]) * z_m[v, u, None]
