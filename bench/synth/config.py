@@ -15,7 +15,7 @@ import numpy as np
 
 from methods.domain.radar import C_M_PER_S, MAROON_F_HIGH_GHZ, MAROON_F_LOW_GHZ, MAROON_N_FREQS
 
-GENERATOR_VERSION = "8"          # bump when the generator's output changes for an unchanged config
+GENERATOR_VERSION = "9"          # bump when the generator's output changes for an unchanged config
 F_LOW_GHZ, F_HIGH_GHZ = MAROON_F_LOW_GHZ, MAROON_F_HIGH_GHZ
 QUARTER_WAVELENGTH_M = C_M_PER_S / (F_HIGH_GHZ * 1e9) / 4.0   # 0.914 mm at 82 GHz
 DISTANCE_RANGE_CM = (20, 60)   # every catalogue part inside the radar volume and MAROON's mask_bb (zmax 0.70 m)
