@@ -248,7 +248,9 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
 
 
 def capture_workers() -> int:
-    """Captures built at once: one per leg_sum.PARTIAL_SUMS cores (each capture's radar sums take that many threads),
-    so one at a time on 2 cores (two at once measured 10-20 % more CPU time there, no faster), eight on 16."""
+    """Captures built at once: one per leg_sum.PARTIAL_SUMS cores (each capture's radar sums take that many threads)
+    and at least two, so that one capture's single-threaded stages (ray casting, camera, files) overlap another's
+    sums: on 2 almost quiet cores the 8 captures took 17.0 s against 21.0 s one at a time (at load ~10 it was the
+    other way round: docs/measurements/synth.md)."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(1, cores // PARTIAL_SUMS)
+    return max(2, cores // PARTIAL_SUMS)
