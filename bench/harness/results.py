@@ -15,7 +15,7 @@ from bench.maroon.images import PNG_COMPRESS_LEVEL, write_uint16_png
 from methods.domain.capture import RadarGrid
 
 #: what a run measures rather than computes (two runs of one cell differ in them): runtimes and their conditions
-MEASURED_COLUMNS = ["runtime_ms", "runtime_runs", "cpu_ms", "call_ms", "load_1m", "timing"]
+MEASURED_COLUMNS = ["runtime_ms", "runtime_runs", "cpu_ms", "call_ms", "load_1m", "others_cores", "timing"]
 RESULT_COLUMNS = ["object", "distance", "frame", "method", "freq", "prior", "f_GHz", "C_g_cm", "C_s_cm", "P_cm",
                   "P_e_cm", "valid_px", "runtime_ms", "device", "timing"]
 

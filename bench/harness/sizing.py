@@ -7,8 +7,9 @@
   a single run, the basic launcher, joblib with one worker, a one-job sweep) or 'parallel' (jobs shared the
   machine: joblib with more than one worker, submitit_local, SLURM arrays with array_parallelism > 1, any other
   launcher). Results rows carry it in the column `timing`, with 'contended' for a row the app timed alone while
-  the machine was busy with other work (`contended`: its 1-minute load average, column `load_1m`, above its
-  number of cores).
+  other processes kept the cores busy during its call (`contended`: on Linux, the CPU time every other process
+  used during the call, from /proc/stat minus our own, column `others_cores`, above half a core on average;
+  elsewhere the 1-minute load average, column `load_1m`, above the number of cores).
 """
 from __future__ import annotations
 
@@ -60,9 +61,27 @@ def machine_load() -> float:
         return float("nan")
 
 
-def contended(load_1m: float) -> bool:
-    """Whether a runtime taken at this load had to share the cores: more runnable tasks than cores on average
-    over the last minute (a lone job keeps the load at or below its own threads' count, at most the cores)."""
+OTHERS_CORES_MAX = 0.5     # other processes' average CPU use (cores) during a call that still counts as alone
+
+
+def busy_cpu_s() -> float:
+    """CPU seconds every core has spent busy since boot (/proc/stat: all but idle and iowait); NaN off Linux.
+    The difference over a call, minus the process's own CPU time, is what the rest of the machine used."""
+    try:
+        with open("/proc/stat") as stat:
+            fields = [int(v) for v in stat.readline().split()[1:]]
+    except (OSError, ValueError):
+        return float("nan")
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)
+    return (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")
+
+
+def contended(load_1m: float, others_cores: float = float("nan")) -> bool:
+    """Whether a runtime had to share the cores: other processes used more than OTHERS_CORES_MAX cores on average
+    during the call (`others_cores`, where measured); else, by the 1-minute load average, more runnable tasks
+    than cores (the load counts our own threads too, so it only catches heavy contention)."""
+    if math.isfinite(others_cores):
+        return others_cores > OTHERS_CORES_MAX
     return load_1m > (os.cpu_count() or 1)
 
 

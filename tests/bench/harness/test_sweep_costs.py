@@ -84,8 +84,10 @@ def test_a_failed_background_write_fails_the_run():
 
 def test_a_row_timed_on_a_busy_machine_is_marked_contended(synth_root, tmp_path, monkeypatch):
     monkeypatch.setattr(app, "machine_load", lambda: 1e3)
+    ticks = iter(range(0, 10**9, 1000))                  # the rest of the machine: 1000 CPU seconds per look
+    monkeypatch.setattr(app, "busy_cpu_s", lambda: float(next(ticks)))
     (row,) = app.run(_cfg(synth_root, "null", "cell=2fsk_d05", "timing.repeat=3"), tmp_path / "busy")
-    assert row["timing"] == "contended" and row["load_1m"] == 1e3
+    assert row["timing"] == "contended" and row["load_1m"] == 1e3 and row["others_cores"] > 1
     assert 1 <= row["runtime_runs"] <= 3 and row["cpu_ms"] > 0
     assert app._reusable("contended", "alone")                       # still busy: re-measuring would not help
     monkeypatch.setattr(app, "machine_load", lambda: 0.0)
