@@ -53,11 +53,11 @@ def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]
     return objects, list(settings.distances) if distances_cm is None else list(distances_cm)
 
 
-# Seconds on two quiet cores before issue 29's work (docs/measurements/sweep.md, issue 29), for the estimate the
-# demo prints before it starts; the image-formation and generator work make them smaller: update them then.
-GENERATE_S_PER_CAPTURE = 12.6
-SWEEP_S_PER_CAPTURE = {"table2": 1.5, "table3": 57.0}
-BP_MAX_S_PER_CAPTURE = 31.0          # table3's longest cell
+# Seconds per capture on two quiet cores (docs/measurements/performance.md, 2026-11-25: generator v9, BP_max's
+# search as released then), for the estimate the demo prints before it starts; re-measure when they move.
+GENERATE_S_PER_CAPTURE = 4.5
+SWEEP_S_PER_CAPTURE = {"table2": 1.5, "table3": 38.0}
+BP_MAX_S_PER_CAPTURE = 19.6          # table3's longest cell
 
 
 def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:

@@ -11,7 +11,7 @@ launcher's own settings before a multirun starts. The ranges:
   checked against the frame when it is read (methods.ops.frequencies.select_frequencies names the frame's file).
 * grid.override: null, or xy_half_m and z_half_m above 0 and at most MAX_HALF_WIDTH_M, whole nxy >= 2 and nz >= 1
   within the grid limits (bench.maroon.limits: BENCH_LIMITS grid_pixels, grid_voxels), and a job whose modelled
-  memory (bench.harness.slurm_resources) fits this machine's.
+  memory (bench.harness.resources) fits this machine's.
 * dataset.frame: what bench.maroon.frames accepts; dataset.captures: null or relative <object>/<distance> folders.
 * roi: what methods.skips.settings accepts, its switches true/false and its margins finite (steps above 0).
 * profile.prior: sound | faithful; booleans (dataset.empty_filtered, metrics.faithful) true/false.
@@ -97,8 +97,8 @@ def _grid(cfg: DictConfig) -> None:
 
 
 def _memory(cfg: DictConfig) -> None:
-    """The job's modelled peak memory (bench.harness.slurm_resources) against this machine's."""
-    from bench.harness.slurm_resources import job_peak_mib
+    """The job's modelled peak memory (bench.harness.resources) against this machine's."""
+    from bench.harness.resources import job_peak_mib
 
     try:
         total_mib = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
@@ -109,7 +109,7 @@ def _memory(cfg: DictConfig) -> None:
         grid = cfg.grid.get("override") or {"nxy": "301", "nz": "201"}      # the model's default grid
         raise cli.UserError(f"grid={cfg.grid.name}", f"{cfg.method.name} on its {grid['nxy']} x {grid['nxy']} x "
                                                      f"{grid['nz']} grid needs about {need_mib / 1024:.1f} GiB "
-                                                     "(bench.harness.slurm_resources), this machine has "
+                                                     "(bench.harness.resources), this machine has "
                                                      f"{total_mib / 1024:.1f} GiB: use a smaller grid")
 
 

@@ -14,9 +14,9 @@ COMMANDS = {
     "experiment": ("experiment", "a whole experiment as a user runs it: wall time against methods + metrics, by stage"),
     "memory": ("memory", "peak memory of sweep cells against the SLURM memory model"),
     "fill": ("fill", "prior hole fills (scanline, delaunay) in runtime against error"),
-    "skips": ("skips", "every skip off and on per catalogue object (CPU)"),
-    "skips-gpu": ("skips_gpu", "the skips on fresh frames on a Warp device"),
-    "skips-reference": ("skips_reference", "the public reference kernels' full computation for the skips"),
+    "skips": ("skips.cpu", "every skip off and on per catalogue object (CPU)"),
+    "skips-gpu": ("skips.gpu", "the skips on fresh frames on a Warp device"),
+    "skips-reference": ("skips.reference", "the public reference kernels' full computation for the skips"),
     "formation": ("formation", "the column-separable BP and BP_max's search on the device, runtime against error"),
     "synth": ("synth", "synthetic capture generation by stage, radar echo from frequency nodes and direct"),
 }

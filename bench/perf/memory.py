@@ -4,7 +4,7 @@ Runs each cell as the job a sweep would run (`python -m bench cell=<cell> grid=<
 dataset.root=DIR store.dir=null`, one process per job, all captures under DIR) and reads the job's peak resident
 set size from the kernel (os.wait4's rusage: ru_maxrss of that process and the children it waited for), started
 from a small interpreter (WAIT4). Beside
-each it prints the model's peak and the memory the SLURM launcher asks for (`bench.harness.slurm_resources`), so the
+each it prints the model's peak and the memory the SLURM launcher asks for (`bench.harness.resources`), so the
 model's error and margin are visible.
 Writes OUT/perf_memory.csv (default outputs/perf/; docs/guide/slurm.md "Memory and time per job" quotes the figures).
 """
@@ -51,7 +51,7 @@ def main(argv=None) -> int:
     from hydra import compose, initialize_config_dir
 
     from bench.harness.app import CONFIG_DIR
-    from bench.harness.slurm_resources import job_mem_gb, job_peak_mib
+    from bench.harness.resources import job_mem_gb, job_peak_mib
     from bench.maroon.reader import discover_captures
 
     parser = cli.ArgumentParser(prog="python -m bench.perf memory", description=__doc__.splitlines()[0])

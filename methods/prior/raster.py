@@ -131,7 +131,7 @@ def fill_scanline(image: np.ndarray) -> np.ndarray:
     where only one direction is two-sided). Pixels with neither keep NaN.
 
     The hull fill without a triangulation (setting `fill=scanline` of `methods.prior.priors`): every value is a fixed
-    float64 expression of at most four covered pixels, so a kernel reproduces it (warp_backend.prior_kernels);
+    float64 expression of at most four covered pixels, so a kernel reproduces it (methods.backends.warp.kernels.prior);
     a plane is reproduced exactly, as by the Delaunay fill. It fills the holes and the gaps between objects the
     Delaunay fill fills, but not the concave notches of an outline that no row or column crosses twice.
     """

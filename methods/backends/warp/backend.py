@@ -226,7 +226,8 @@ class WarpBackend(Backend):
         if volume:
             self.volume(signal, freqs_hz, tx_m, rx_m, [0.0], [0.0], [0.3, 0.301])
         if prior and self.rasterises_prior:
-            from methods.backends.warp import fsk_kernels, prior_kernels
+            from methods.backends.warp.kernels import fsk as fsk_kernels
+            from methods.backends.warp.kernels import prior as prior_kernels
             for module in (prior_kernels, fsk_kernels):
                 wp.load_module(module=module.__name__, device=self.device)
         self.warmed.add(key)

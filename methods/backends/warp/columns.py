@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from methods.backends.warp import columns_kernels as kernels
 from methods.backends.warp.frames import BufferPool, FrameInputs, vec2_of
+from methods.backends.warp.kernels import columns as kernels
 from methods.domain.radar import C_M_PER_S
 
 TERM_TOL = 1e-4              # default per-term interpolation bound (relative; measured image error ~3e-6)

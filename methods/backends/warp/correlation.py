@@ -9,8 +9,8 @@ import numpy as np
 import warp as wp
 
 from methods.backends.warp import columns
-from methods.backends.warp import correlation_kernels as kernels
 from methods.backends.warp.frames import C_M_PER_S, BufferPool, FrameCache, FrameInputs
+from methods.backends.warp.kernels import correlation as kernels
 from methods.ops import range_compression
 
 KERNELS = ("tc", "separable", "direct", "range", "columns")

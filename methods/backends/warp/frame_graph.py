@@ -17,10 +17,12 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from methods.backends.warp import correlation_kernels as ck
-from methods.backends.warp import fsk_kernels, prior_kernels, table_kernels
 from methods.backends.warp.frames import C_M_PER_S, FrameInputs, antennas4
 from methods.backends.warp.fsk import grid_arrays
+from methods.backends.warp.kernels import correlation as ck
+from methods.backends.warp.kernels import fsk as fsk_kernels
+from methods.backends.warp.kernels import prior as prior_kernels
+from methods.backends.warp.kernels import tables as table_kernels
 from methods.backends.warp.prior import pixel_scale
 
 GRAPHS_KEPT = 4

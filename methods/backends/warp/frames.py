@@ -9,8 +9,8 @@ from functools import cached_property
 import numpy as np
 import warp as wp
 
-from methods.backends.warp import table_kernels
-from methods.backends.warp.correlation_kernels import MAX_ANTENNAS, TC2_HALF, TC2_KP, TC2_PAD, TC_ANT, TX_CHUNK
+from methods.backends.warp.kernels import tables as table_kernels
+from methods.backends.warp.kernels.correlation import MAX_ANTENNAS, TC2_HALF, TC2_KP, TC2_PAD, TC_ANT, TX_CHUNK
 from methods.domain.radar import C_M_PER_S
 from methods.ops import range_compression
 

@@ -10,8 +10,8 @@ from collections.abc import Callable
 import numpy as np
 import warp as wp
 
-from methods.backends.warp import fsk_kernels as kernels
 from methods.backends.warp.frames import C_M_PER_S, BufferPool
+from methods.backends.warp.kernels import fsk as kernels
 from methods.backends.warp.prior import DevicePrior
 
 

@@ -10,8 +10,8 @@ import numpy as np
 import warp as wp
 from scipy.spatial import Delaunay, QhullError
 
-from methods.backends.warp import hull_fill_kernels as kernels
 from methods.backends.warp.frames import BufferPool
+from methods.backends.warp.kernels import hull_fill as kernels
 
 FAR_M = 1.0e300
 

@@ -18,9 +18,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from methods.backends.warp import prior_kernels as kernels
 from methods.backends.warp.frames import BufferPool
 from methods.backends.warp.hull_fill import fill_hull
+from methods.backends.warp.kernels import prior as kernels
 from methods.domain.capture import DepthFrame, Mesh, RadarGrid
 from methods.domain.transforms import apply_transform
 from methods.prior.image import Prior

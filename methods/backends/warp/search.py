@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from methods.backends.warp import search_kernels
 from methods.backends.warp.correlation import range_profiles
 from methods.backends.warp.frames import BufferPool, FrameInputs
+from methods.backends.warp.kernels import search as search_kernels
 
 
 class FrameProfiles:

@@ -1,6 +1,5 @@
-"""bench.harness.slurm: time limits from the cell, the shared-path check, a dead job's cause, temp-folder ownership by
-the
-lock; and, opt-in, the whole SLURM path on a real single-node cluster (scripts/slurm_try.sh)."""
+"""bench.harness.slurm.launcher: time limits from the cell, the shared-path check, a dead job's cause, temp-folder
+ownership by the lock; and, opt-in, the whole SLURM path on a real single-node cluster (scripts/slurm_try.sh)."""
 from __future__ import annotations
 
 import os
@@ -14,7 +13,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from bench import cli
-from bench.harness import slurm
+from bench.harness.slurm import launcher as slurm
 
 REPO = Path(__file__).resolve().parents[3]
 

@@ -1,4 +1,4 @@
-"""Memory per SLURM job from its cell (bench.harness.slurm_resources): the model against a real job's measured peak, how
+"""Memory per SLURM job from its cell (bench.harness.resources): the model against a real job's measured peak, how
 the launcher's `mem_gb` setting is read, and what the SLURM preset hands to sbatch."""
 from __future__ import annotations
 
@@ -10,9 +10,10 @@ import time
 import pytest
 from hydra import compose, initialize_config_dir
 
-from bench.harness import captures, slurm_resources
+from bench.harness import captures
+from bench.harness import resources as slurm_resources
 from bench.harness.app import CONFIG_DIR
-from bench.harness.slurm_resources import job_mem_gb, job_peak_mib
+from bench.harness.resources import job_mem_gb, job_peak_mib
 from bench.perf.memory import job_peak_mib_measured
 
 

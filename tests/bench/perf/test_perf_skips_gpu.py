@@ -1,4 +1,4 @@
-"""bench.perf.skips_gpu: frames no cache has seen (same physics), the agreement share, the one-line CLI error."""
+"""bench.perf.skips.gpu: frames no cache has seen (same physics), the agreement share, the one-line CLI error."""
 from __future__ import annotations
 
 import subprocess
@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.perf.skips_gpu import agreement, new_frame
+from bench.perf.skips.gpu import agreement, new_frame
 from bench.synth.memory import make_capture, square_grid
 from methods.domain.capture import CameraIntrinsics, DepthFrame
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from methods.backends.warp.prior_kernels import FAR
+from methods.backends.warp.kernels.prior import FAR
 
 
 @wp.kernel(enable_backward=False)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from methods.backends.warp.correlation_kernels import cmul, path_excess_m, phasor_of_cycles, reduced_phase
+from methods.backends.warp.kernels.correlation import cmul, path_excess_m, phasor_of_cycles, reduced_phase
 
 MAX_COLUMNS = 4                    # table columns a gather thread holds in registers
 MAX_SMALL = 8                      # transmitters of small columns taken directly

@@ -84,7 +84,7 @@ def write_references(frames: Path, bundle: Path, cells: list[str], grid_name: st
     """Compute the reference depth maps of every BP cell of every capture in `frames` into one npz `bundle`."""
     import cupy as cp
 
-    from bench.perf.skips import CELLS, GRIDS
+    from bench.perf.skips.cpu import CELLS, GRIDS
     from methods.ops.filtering import filter_depth
     from methods.ops.frequencies import config_indices
 

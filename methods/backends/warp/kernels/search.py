@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from methods.backends.warp.correlation_kernels import range_partial
+from methods.backends.warp.kernels.correlation import range_partial
 
 SEARCH_OPTIONS = {"enable_backward": False, "max_unroll": 32}
 SEARCH_BLOCK = 32                  # threads per pixel on CUDA (one warp)

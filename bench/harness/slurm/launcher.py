@@ -15,7 +15,7 @@ submitting process and before anything is submitted:
 * sizes each cell's job: its name (`bench-<cell>`, `bench-<cell>-offset_mm=2` with parameters), GPUs (1 for
   device=cuda, none otherwise), CPUs per task (at most what a node of the partition has: more would leave the job
   pending forever), with `mem_gb: 0` its
-  memory from the cell (bench.harness.slurm_resources), and, with `timeout_min: 0`, a time limit from the cell
+  memory from the cell (bench.harness.resources), and, with `timeout_min: 0`, a time limit from the cell
   (`time_limit_min`).
 
 Then it waits for every job without relying on accounting: a job is done when submitit's result file appears and
@@ -48,7 +48,7 @@ from submitit.core.utils import FailedJobError, UncompletedJobError
 from bench import cli
 from bench.harness import validate
 from bench.harness.identity import params_string
-from bench.harness.slurm_resources import job_mem_gb
+from bench.harness.resources import job_mem_gb
 from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
 

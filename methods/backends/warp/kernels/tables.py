@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from methods.backends.warp.correlation_kernels import TC2_HALF, TC_ANT, TC_K
+from methods.backends.warp.kernels.correlation import TC2_HALF, TC_ANT, TC_K
 
 
 @wp.kernel(enable_backward=False)

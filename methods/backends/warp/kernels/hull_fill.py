@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from methods.backends.warp.prior_kernels import FAR, raster_triangle
+from methods.backends.warp.kernels.prior import FAR, raster_triangle
 
 
 @wp.kernel(enable_backward=False)
