@@ -46,7 +46,7 @@ setup() {
     echo "[setup] creating .venv with $($py --version)"
     "$py" -m venv .venv
   fi
-  stamp=".venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)"
+  stamp=".venv/.installed-$(cat pyproject.toml run.sh | sha256sum | cut -c1-16)"
   if [ ! -f "$stamp" ]; then
     echo "[setup] installing the package and its dependencies into .venv (first run: a few minutes, 4 steps)"
     echo "[setup] 1/4 pip itself"
@@ -63,7 +63,9 @@ setup() {
     requirements rest > .venv/requirements-rest.txt
     .venv/bin/python -m pip install -q --no-warn-conflicts -r .venv/requirements-rest.txt
     echo "[setup] 4/4 this package (editable)"
-    .venv/bin/python -m pip install -q --no-deps -e .
+    # compat: the project folder on sys.path, so that Hydra's plugin scan finds hydra_plugins/mm2fsk_bench (its
+    # sweeper and launchers) from any working directory; the default editable finder hides it from that scan
+    .venv/bin/python -m pip install -q --no-deps -e . --config-settings editable_mode=compat
     rm -f .venv/.installed-*; touch "$stamp"
     echo "[setup] done"
   fi
