@@ -28,7 +28,7 @@ import pandas as pd
 
 from bench import cli
 from bench.harness.stages import ENV
-from bench.perf.common import DEFAULT_OUT, write_rows
+from bench.perf.common import add_out_option, write_rows
 
 STAGES = ("composition", "imports", "reading", "ground truth", "methods", "metrics", "outputs", "merge")
 
@@ -87,7 +87,7 @@ def main(argv=None) -> int:
     parser.add_argument("--grid", default=None, help="grid config for every cell (e.g. bp_cpu on a small CPU)")
     parser.add_argument("--cells", nargs="+", default=None, help="only these cells of the experiment")
     parser.add_argument("--repeat", type=cli.positive_int, default=1, help="runs with the ground truth kept")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    add_out_option(parser)
     args = parser.parse_args(argv)
     root = cli.existing_path(args.root, "dir", "--root").resolve()
     device = cli.resolve_device(args.device)

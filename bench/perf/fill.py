@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from bench import cli
-from bench.perf.common import DEFAULT_OUT, write_rows
+from bench.perf.common import DEFAULT_OUT, add_device_option, write_rows
 from bench.progress import each
 from methods import reconstruct
 from methods.api import prior_image_m
@@ -99,7 +99,7 @@ def main(argv=None) -> int:
     parser = cli.ArgumentParser(prog="python -m bench.perf fill", description=__doc__.splitlines()[0])
     parser.add_argument("--root", type=Path, default=Path("data/synthetic"), help="dataset root (default: %(default)s)")
     parser.add_argument("--freqs", nargs="+", default=["d10", "d1", "d05"])
-    parser.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto", "warp-cpu"])
+    add_device_option(parser)
     parser.add_argument("--repeat", type=cli.positive_int, default=3, help="prior builds timed per capture")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="folder for perf_fill.csv")
     args = parser.parse_args(argv)

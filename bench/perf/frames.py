@@ -32,7 +32,7 @@ import numpy as np
 
 from bench import cli
 from bench.maroon.antennas import load_antenna_array
-from bench.perf.common import DEFAULT_OUT, percentile, write_rows
+from bench.perf.common import DEFAULT_OUT, add_device_option, percentile, write_rows
 from bench.progress import each
 from bench.synth.memory import CAMERA, make_capture
 from methods import reconstruct
@@ -268,7 +268,7 @@ def _case(text: str) -> tuple[str, str, str]:
 
 def main(argv=None) -> int:
     parser = cli.ArgumentParser(prog="python -m bench.perf frames", description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto", "warp-cpu"])
+    add_device_option(parser)
     parser.add_argument("--scene", default="masked", choices=["masked", "plate"],
                         help="in-memory frames (module doc): catalogue-like masked objects, or the full plate")
     parser.add_argument("--root", type=Path, default=None,

@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 from bench import cli
-from bench.perf.common import DEFAULT_OUT, write_rows
+from bench.perf.common import add_device_option, add_out_option, write_rows
 from bench.perf.sweep import table3_cells
 from bench.progress import each
 
@@ -159,10 +159,10 @@ def main(argv=None) -> int:
     parser.add_argument("--root", type=Path, default=None, help="dataset root (e.g. data/synthetic)")
     parser.add_argument("--cells", nargs="+", default=None, help="default: the table3 cells")
     parser.add_argument("--captures", nargs="+", default=None, help="OBJECT/DISTANCE (default: all)")
-    parser.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto", "warp-cpu"])
+    add_device_option(parser)
     parser.add_argument("--grid", default=None, help="grid config for every cell (e.g. paper, bp_cpu)")
     parser.add_argument("--store", action="store_true", help="use a fresh result store (default: none)")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    add_out_option(parser)
     parser.add_argument("--results-frames", type=int, nargs="+", default=None, metavar="N",
                         help="instead: results.csv written over N frames, appended beside rewritten "
                              "(OUT/perf_results_csv.csv)")

@@ -27,7 +27,7 @@ from pathlib import Path
 from bench import cli
 from bench.maroon import reader as maroon
 from bench.maroon import safe_io
-from bench.perf.common import DEFAULT_OUT, write_rows
+from bench.perf.common import DEFAULT_OUT, add_device_option, add_out_option, write_rows
 from bench.progress import each
 
 SEQUENCE_ROOT = DEFAULT_OUT / "sequence"
@@ -162,13 +162,13 @@ def main(argv=None) -> int:
     parser = cli.ArgumentParser(prog="python -m bench.perf stream", description=__doc__.splitlines()[0])
     parser.add_argument("--root", type=Path, default=None, help="dataset root (default: the synthetic sequence)")
     parser.add_argument("--capture", default=None, help="OBJECT/DISTANCE under --root")
-    parser.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto", "warp-cpu"])
+    add_device_option(parser)
     parser.add_argument("--method", default="mm2fsk")
     parser.add_argument("--freq", default="d10")
     parser.add_argument("--prior", default="realsense")
     parser.add_argument("--passes", type=cli.positive_int, default=3)
     parser.add_argument("--no-metrics", action="store_true", help="read and method only (no Open3D needed)")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    add_out_option(parser)
     args = parser.parse_args(argv)
     args.device = cli.resolve_device(args.device)
     out = cli.output_dir(args.out)
