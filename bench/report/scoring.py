@@ -56,7 +56,7 @@ def outcomes(rows: pd.DataFrame, floor_pct: float = COVERAGE_FLOOR_PCT) -> pd.Da
     keys = group_columns(rows)
     rows = rows.assign(_reason=_failure_reason(rows, floor_pct))
     if PARAMETERS in rows:
-        rows[PARAMETERS] = rows[PARAMETERS].fillna("").astype(str)
+        rows[PARAMETERS] = rows[PARAMETERS].astype(object).fillna("").astype(str)
     rows = rows.drop_duplicates(keys + CAPTURE_COLUMNS)
     frames_per_capture = rows[CAPTURE_COLUMNS].drop_duplicates().groupby(PER_CAPTURE).size().rename("_expected")
     values = [c for c in (*METRICS_CM, "coverage_pct", "off_pct", "off_px", "off_err_cm") if c in rows]

@@ -169,7 +169,7 @@ def _scored(rows: pd.DataFrame, floor_pct: float) -> tuple[pd.DataFrame, pd.Data
     rows = rows.assign(_alone=rows["timing"].eq("alone") if "timing" in rows else False,
                        runtime_ms=rows["runtime_ms"] if "runtime_ms" in rows else np.nan)
     if scoring.PARAMETERS in rows:
-        rows[scoring.PARAMETERS] = rows[scoring.PARAMETERS].fillna("").astype(str)
+        rows[scoring.PARAMETERS] = rows[scoring.PARAMETERS].astype(object).fillna("").astype(str)
     shown = [m for m in INTERVAL_COLUMNS if m in outcome]
     matrices = {m: scoring.metric_matrix(outcome, m) for m in shown}
     common = {m: scoring.common_captures(matrices[m]) for m in shown}

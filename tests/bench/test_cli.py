@@ -144,6 +144,8 @@ DOC_RUNS: dict[str, list[str]] = {
         ["{py} -m bench.report.agreement --help"],
     # regenerating results/: the demo and the faithful sweeps take minutes to hours; their options are checked
     ".venv/bin/python -m bench.demo --update-results": ["{py} -m bench.demo --help"],
+    ".venv/bin/python -m bench.synth --out data/full --catalogue full --distances 30":
+        ["{py} -m bench.synth --help"],              # 27 captures take minutes; the catalogue's tests generate parts
     ".venv/bin/python -m bench -m threshold_db=10,14,20 method=mm2fsk freq=d10 prior=realsense":
         ["{py} -m bench threshold_db=10 method=mm2fsk freq=d10 prior=realsense --cfg job"],   # rows: test_identity
     "python -m bench.report.merge ROOT": ["{py} -m bench.report.merge --help"],   # merges run in test_sweep_report
