@@ -40,4 +40,5 @@ def main(argv: list[str]) -> int:
     return module.main(rest)
 
 
-cli.run_guarded(lambda: main(sys.argv[1:]))
+if __name__ == "__main__":     # importable: the tests read COMMANDS
+    cli.run_guarded(lambda: main(sys.argv[1:]))

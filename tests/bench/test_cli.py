@@ -404,16 +404,18 @@ def test_hydra_config_mistake_lists_without_traceback(name, mistake_results):
 
 
 def test_benchmarks_write_under_outputs_by_default():
-    """The tracked results/ is written only when a command is told to (`--out results...`)."""
-    from bench.perf import correlate as perf
-    from bench.perf import frames as perf_frames
-    from bench.perf import overhead as perf_overhead
-    from bench.perf import stream as perf_stream
-    from bench.perf import sweep as perf_sweep
+    """The tracked results/ is written only when a command is told to (`--out results...`): every benchmark's
+    default folder is the common one, under outputs/."""
+    import importlib
+
+    from bench.perf import common
+    from bench.perf.__main__ import COMMANDS
     from bench.stress import __main__ as stress
 
-    for module in (perf, perf_frames, perf_stream, perf_sweep, perf_overhead, stress):
-        assert module.DEFAULT_OUT.parts[0] == "outputs", module.__name__
+    assert common.DEFAULT_OUT.parts[0] == "outputs" and stress.DEFAULT_OUT.parts[0] == "outputs"
+    for module, _ in COMMANDS.values():
+        module = importlib.import_module(f"bench.perf.{module}")
+        assert getattr(module, "DEFAULT_OUT", common.DEFAULT_OUT) == common.DEFAULT_OUT, module.__name__
 
 
 @pytest.mark.parametrize("argv", [["bench.report.tables", "table3"], ["bench", "--help"],
