@@ -121,5 +121,12 @@ class Backend:
         `roi_pixels` (ny, nx) bool restricts the correlated pixels where `prior.takes_roi`."""
         raise NotImplementedError(f"{type(self).__name__} holds no device-resident priors")
 
+    def mm3fsk_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, prior: Prior, coarse: list[int],
+                        threshold_db: float | None, timer, roi_pixels: np.ndarray | None = None):
+        """MM-3FSK (`methods.mm3fsk`, `coarse` the coarse pair's indices) at a device-resident prior where it lives:
+        ((depth_m, magnitude, prior_m) (ny, nx), prior offset m), the correlated pixels restricted to `roi_pixels`
+        (ny, nx) bool; or None where this backend leaves it to the host."""
+        return None
+
     def warm_up(self, signal, freqs_hz, tx_m, rx_m, *, volume: bool, prior: bool) -> None:
         """Compile what a timed run will need (nothing to compile on the numpy backend)."""

@@ -176,6 +176,20 @@ class WarpBackend(Backend):
             return self.make_launch(signal, freqs_hz, tx_m, rx_m, points_m=points, reuse=True)()
         return fsk.depth_at_prior(self.buffers, correlate_points, signal, freqs_hz, grid, prior, keep_ratio, timer)
 
+    def mm3fsk_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid, prior, coarse, threshold_db, timer,
+                        roi_pixels=None):
+        """MM-3FSK's frame graph (prior, both correlations, median offset, depth, filter: one launch) for a RealSense
+        prior not built yet; None (the host path) for any other prior."""
+        if not (isinstance(prior, DeferredPrior) and prior.pending):
+            return None
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        with timer.stage("correlate"):
+            graph = frame_graph(self.buffers, prior.depth, prior.realsense2radar, grid, prior.max_jump_mm, freqs_hz,
+                                tx_m, rx_m, self._keep_ratio(threshold_db), coarse)
+            depth_m, magnitude, prior_m, n_covered, n_used = graph.run(prior.depth, signal, roi_pixels)
+        prior.resolve(prior_m, n_covered, n_used)
+        return (depth_m, magnitude, prior_m), graph.offset_m
+
     def _point_correlator(self, signal, freqs_hz, tx_m, rx_m):
         """Function device points (n,) vec3d -> device phasors (F, n) of this frame (inputs looked up once)."""
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)

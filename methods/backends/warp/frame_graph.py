@@ -1,6 +1,6 @@
-"""A whole MM-2FSK new frame as one CUDA graph: the RealSense prior (camera quads, the scanline hole fill), the
-correlation at the prior (tables built from the raw samples, tensor cores), depth and filter, and the copies in
-and out, replayed per frame with one launch and one synchronisation (`FrameGraph.run`).
+"""A whole MM-2FSK (or MM-3FSK) new frame as one CUDA graph: the RealSense prior (camera quads, the scanline hole
+fill), the correlation at the prior (tables built from the raw samples, tensor cores), depth and filter, and the
+copies in and out, replayed per frame with one launch and one synchronisation (`FrameGraph.run`).
 
 The launches are those of the step-by-step device path (`warp_backend.prior.realsense_prior` with fill
 'scanline', then `warp_backend.fsk.depth_at_prior`), on buffers allocated once per setting (depth image size,
@@ -9,7 +9,11 @@ fixed, and with launch sizes that do not depend on the frame: the covered pixels
 before and every later kernel runs over all ny * nx slots, threads (and the correlation's blocks) past the count
 returning at once, so the count never goes to the host before the end. A new frame's samples,
 depth image and mask are copied into pinned staging buffers on the host; the graph's first nodes copy them to the
-device. Warp-CPU has no graphs: there `run` issues the same launches (the correlation with the separable kernel,
+device. With a coarse pair (MM-3FSK, `methods.mm3fsk`) the correlation at the prior is the coarse pair's; the
+median of its corrections over the pixels the filter keeps (`MedianOffset`: a radix select on the corrections
+quantised to 2^32 steps over +-3.2 rad, within 3e-11 m of np.median's for d05_d10's pair) moves every point, the
+three frequencies are correlated there and the slope gives the depth, still one launch and one copy back.
+Warp-CPU has no graphs: there `run` issues the same launches (the correlation with the separable kernel,
 Warp-CPU's default), which is how the tests compare this path with the step-by-step one without a GPU.
 """
 from __future__ import annotations
@@ -30,13 +34,14 @@ PEAK_SHARDS = 256          # partial maxima of the magnitude (fsk_kernels.reduce
 _GRAPHS: dict = {}
 
 
-def graph_key(depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio, device) -> tuple:
+def graph_key(depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio, device,
+              coarse=None) -> tuple:
     """Everything a FrameGraph bakes in (sizes, constants, scalar launch arguments)."""
     k = depth.intrinsics
     return (str(device), depth.depth_mm.shape, depth.mask is not None, (k.fx, k.fy, k.cx, k.cy),
             float(depth.depth_scale_m), np.asarray(realsense2radar, dtype=np.float64).tobytes(), grid,
             max_jump_mm, np.asarray(freqs_hz, dtype=np.float64).tobytes(), tx_m.tobytes(), rx_m.tobytes(),
-            float(keep_ratio))
+            float(keep_ratio), None if coarse is None else tuple(coarse))
 
 
 class GraphCorrelator:
@@ -98,6 +103,42 @@ class GraphCorrelator:
         return self.out
 
 
+class MedianOffset:
+    """MM-3FSK's prior offset on the device (module doc): `enqueue` launches, over a fixed number of slots (the
+    first count[0] used), the median of the corrections (m) whose magnitude the filter keeps into `offset` and
+    moves every used point's depth by it. Exact up to the quantisation: within width / 2^33 of np.median."""
+
+    def __init__(self, dev, n: int, m_per_rad: float):
+        self.device = dev
+        # the corrections' range: float32 atan2 stays inside +-3.2 rad
+        self.lo_m, self.width_m = wp.float64(-3.2 * m_per_rad), wp.float64(6.4 * m_per_rad)
+        self.keys = wp.empty(n, dtype=wp.int64, device=dev)
+        self.n_kept = wp.empty(1, dtype=wp.int32, device=dev)
+        self.rank = wp.empty(2, dtype=wp.int32, device=dev)
+        self.prefix = wp.empty(2, dtype=wp.int64, device=dev)
+        self.hist = wp.empty((2, fsk_kernels.MEDIAN_BINS), dtype=wp.int32, device=dev)
+        self.offset = wp.zeros(1, dtype=wp.float64, device=dev)
+
+    @property
+    def bound_m(self) -> float:
+        """The largest difference from np.median's offset (m): half a quantisation step."""
+        return float(self.width_m) / fsk_kernels.MEDIAN_KEYS / 2.0
+
+    def enqueue(self, count, correction, magnitude, keep_ratio: float, peak, points) -> None:
+        dev, n = self.device, self.keys.shape[0]
+        self.n_kept.zero_()
+        wp.launch(fsk_kernels.median_keys, dim=n, inputs=[count, correction, magnitude, keep_ratio, peak, self.lo_m,
+                                                          self.width_m, self.keys, self.n_kept], device=dev)
+        wp.launch(fsk_kernels.median_start, dim=2, inputs=[self.n_kept, self.rank, self.prefix, self.hist], device=dev)
+        for level in range(fsk_kernels.MEDIAN_LEVELS):
+            shift = 8 * (fsk_kernels.MEDIAN_LEVELS - 1 - level)
+            wp.launch(fsk_kernels.median_histogram, dim=n, inputs=[count, self.keys, shift, self.prefix, self.hist],
+                      device=dev)
+            wp.launch(fsk_kernels.median_digit, dim=2, inputs=[self.rank, self.prefix, self.hist], device=dev)
+        wp.launch(fsk_kernels.shift_points_by_median, dim=n,
+                  inputs=[count, self.n_kept, self.prefix, self.lo_m, self.width_m, points, self.offset], device=dev)
+
+
 class CapturedLaunches:
     """A fixed sequence of copies and launches on fixed buffers (`_enqueue`, defined by the subclass), captured once
     as a CUDA graph and replayed per frame; Warp-CPU has no graphs, so there it is issued anew each time."""
@@ -124,9 +165,11 @@ class CapturedLaunches:
 
 
 class FrameGraph(CapturedLaunches):
-    """The buffers and launches of one setting (module doc); `run(depth, signal)` computes a frame."""
+    """The buffers and launches of one setting (module doc); `run(depth, signal)` computes a frame. `coarse`:
+    MM-3FSK's coarse pair (indices into three ascending `freqs_hz`), None for MM-2FSK's two frequencies."""
 
-    def __init__(self, buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio):
+    def __init__(self, buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio,
+                 coarse=None):
         dev = wp.get_device(buffers.wp_device)
         self.device, self.grid = dev, grid
         ny, nx = self.shape = grid.image_shape
@@ -152,14 +195,26 @@ class FrameGraph(CapturedLaunches):
         self.points = wp.zeros(n_px, dtype=wp.vec3d, device=dev)          # unused slots: finite points
         self.pixel = wp.zeros(n_px, dtype=wp.int32, device=dev)
         self.maps = wp.empty((3, n_px), dtype=wp.float64, device=dev)
-        self.correlator = GraphCorrelator(dev, n_px, freqs_hz, tx_m, rx_m)
+        self.coarse = None if coarse is None else list(coarse)
+        pair_hz = freqs_hz if coarse is None else freqs_hz[self.coarse]
+        self.correlator = GraphCorrelator(dev, n_px, pair_hz, tx_m, rx_m)
+        if coarse is not None:
+            self.fine_correlator = GraphCorrelator(dev, n_px, freqs_hz, tx_m, rx_m)
+            self.correction = wp.empty(n_px, dtype=wp.float64, device=dev)
+            self.coarse_magnitude = wp.empty(n_px, dtype=wp.float32, device=dev)
+            offsets_hz = freqs_hz - freqs_hz[-1]
+            centred_hz = offsets_hz - offsets_hz.mean()
+            self.centred = wp.vec3d(*(centred_hz / (centred_hz @ centred_hz)))
+        self.offset_host = wp.zeros(1, dtype=wp.float64, device="cpu", pinned=pinned)
         k = depth.intrinsics
         self.cam = prior_kernels.vec9d(k.fx, k.fy, k.cx, k.cy, depth.depth_scale_m * 1000.0, *pixel_scale(grid))
         self.xf = wp.mat44d(*np.asarray(realsense2radar, dtype=np.float64).ravel())
         self.max_jump = wp.float64(-1.0 if max_jump_mm is None else max_jump_mm)
         self.use_mask = int(depth.mask is not None)
         self.x_m, self.y_m = grid_arrays(buffers, grid)
-        self.m_per_rad = float(C_M_PER_S / (4.0 * np.pi * (freqs_hz[1] - freqs_hz[0])))
+        self.m_per_rad = float(C_M_PER_S / (4.0 * np.pi * (pair_hz[1] - pair_hz[0])))
+        if coarse is not None:
+            self.median = MedianOffset(dev, n_px, self.m_per_rad)
         self.keep_ratio = float(keep_ratio)
         self._capture()
 
@@ -186,37 +241,72 @@ class FrameGraph(CapturedLaunches):
                   inputs=[nx, self.filled, self.x_m, self.y_m, self.slot, self.points, self.pixel, self.maps, 1,
                           self.roi], device=dev)
         ph = self.correlator.enqueue(self.points, self.slot)
-        wp.launch(fsk_kernels.depth_at_prior_counted, dim=n_px,
-                  inputs=[ph, self.pixel, self.slot, self.m_per_rad, self.maps, self.shards], device=dev)
+        if self.coarse is None:
+            wp.launch(fsk_kernels.depth_at_prior_counted, dim=n_px,
+                      inputs=[ph, self.pixel, self.slot, self.m_per_rad, self.maps, self.shards], device=dev)
+        else:
+            self._enqueue_mm3fsk(ph)
         wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
         wp.launch(fsk_kernels.magnitude_filter_counted, dim=n_px,
                   inputs=[self.pixel, self.slot, self.keep_ratio, self.peak, self.maps], device=dev)
         wp.copy(self.maps_host, self.maps)
         wp.copy(self.stats_host, self.stats, count=2)
         wp.copy(self.slot_host, self.slot)
+        if self.coarse is not None:
+            wp.copy(self.offset_host, self.median.offset)
+
+    def _enqueue_mm3fsk(self, ph: wp.array) -> None:
+        """MM-3FSK after the coarse pair's correlation `ph` at the prior: corrections, their median over the kept
+        pixels, every point moved by it, the three frequencies there and the slope depth (into maps, shards)."""
+        dev, n_px = self.device, self.points.shape[0]
+        wp.launch(fsk_kernels.coarse_correction_counted, dim=n_px,
+                  inputs=[ph, self.slot, self.m_per_rad, self.correction, self.coarse_magnitude, self.shards],
+                  device=dev)
+        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
+        self.shards.zero_()
+        self.median.enqueue(self.slot, self.correction, self.coarse_magnitude, self.keep_ratio, self.peak,
+                            self.points)
+        fine = self.fine_correlator.enqueue(self.points, self.slot)
+        wp.launch(fsk_kernels.slope_depth_counted, dim=n_px,
+                  inputs=[fine, self.pixel, self.slot, self.centred, float(C_M_PER_S / (4.0 * np.pi)), self.points,
+                          self.maps, self.shards], device=dev)
 
     def run(self, depth, signal: np.ndarray, roi_pixels: np.ndarray | None = None
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
         """(depth_m, magnitude, prior_m) (ny, nx) NaN where none, the prior's covered pixels and those correlated
         (inside `roi_pixels` (ny, nx) bool, None = all) of a new frame: its depth frame (the setting's size) and
-        two-frequency samples (n_rx, n_tx, 2)."""
+        samples (n_rx, n_tx, F) at the setting's frequencies. With a coarse pair, `offset_m` then holds the
+        frame's prior offset (m)."""
         np.copyto(self.roi_host.numpy(), 1 if roi_pixels is None else roi_pixels.ravel(), casting="unsafe")
         np.copyto(self.depth_host.numpy(), depth.depth_mm, casting="unsafe")
         if self.use_mask:
             np.copyto(self.mask_host.numpy(), depth.mask, casting="unsafe")
-        self.correlator.load(signal)
+        if self.coarse is None:
+            self.correlator.load(signal)
+        else:
+            self.correlator.load(signal[:, :, self.coarse])
+            self.fine_correlator.load(signal)
         self._replay()
         maps = self.maps_host.numpy().reshape(3, *self.shape).copy()
         n_covered, n_filled = (int(v) for v in self.stats_host.numpy())
         return maps[0], maps[1], maps[2], n_covered + n_filled, int(self.slot_host.numpy()[0])
 
+    @property
+    def offset_m(self) -> float:
+        """MM-3FSK's prior offset of the last frame run (m): the median coarse correction (0 if none kept)."""
+        return float(self.offset_host.numpy()[0])
 
-def frame_graph(buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio) -> FrameGraph:
-    """The FrameGraph of this setting, built (and on CUDA captured) on first use."""
-    key = graph_key(depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio, buffers.wp_device)
+
+def frame_graph(buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio,
+                coarse=None) -> FrameGraph:
+    """The FrameGraph of this setting (`coarse`: MM-3FSK's pair, None for MM-2FSK), built (and on CUDA captured)
+    on first use."""
+    freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
+    key = graph_key(depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio, buffers.wp_device,
+                    coarse)
     if key not in _GRAPHS:
         _GRAPHS[key] = FrameGraph(buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m,
-                                  keep_ratio)
+                                  keep_ratio, coarse)
         while len(_GRAPHS) > GRAPHS_KEPT:
             _GRAPHS.pop(next(iter(_GRAPHS)))
     return _GRAPHS[key]

@@ -140,23 +140,30 @@ def coarse_points(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32
     maps[2, pixel[i]] = coarse
 
 
+@wp.func
+def slope_depth_at(c1: wp.vec2f, c2: wp.vec2f, c3: wp.vec2f, centred_hz: wp.vec3d, m_per_rad_hz: wp.float64,
+                   guess_m: wp.float64):
+    """(depth, magnitude) of `fsk3.slope_correction_m` on three phasors relative to the last: depth = guess - c s /
+    (4 pi), s the least-squares phase slope (centred_hz = f - mean f over centred_hz . centred_hz, m_per_rad_hz =
+    c / (4 pi)); magnitude |(c1 + c2 + c3) / 3|."""
+    r0 = pair_correction_m(c3, c1, wp.float64(1.0))        # angle(c_k conj c3)
+    r1 = pair_correction_m(c3, c2, wp.float64(1.0))
+    r2 = pair_correction_m(c3, c3, wp.float64(1.0))
+    mean = (r0 + r1 + r2) / wp.float64(3.0)
+    slope = centred_hz[0] * (r0 - mean) + centred_hz[1] * (r1 - mean) + centred_hz[2] * (r2 - mean)
+    return guess_m - m_per_rad_hz * slope, wp.length((c1 + c2 + c3) / wp.float32(3.0))
+
+
 @wp.kernel(enable_backward=False)
 def slope_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), centred_hz: wp.vec3d,
                 m_per_rad_hz: wp.float64, points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
                 peak: wp.array(dtype=wp.float32)):
-    """`fsk3.slope_correction_m` of three phasors relative to the last: depth = coarse - c s / (4 pi), s the
-    least-squares phase slope (centred_hz = f - mean f over centred_hz . centred_hz, m_per_rad_hz = c / (4 pi));
-    magnitude |(c1 + c2 + c3) / 3|; peak = its maximum (zeroed before)."""
+    """3FSK's fine step (`slope_depth_at` at each point's coarse depth); peak = the magnitudes' maximum (zeroed
+    before)."""
     i = wp.tid()
     p = pixel[i]
-    c3 = ph[2, i]
-    r0 = pair_correction_m(c3, ph[0, i], wp.float64(1.0))        # angle(c_k conj c3)
-    r1 = pair_correction_m(c3, ph[1, i], wp.float64(1.0))
-    r2 = pair_correction_m(c3, c3, wp.float64(1.0))
-    mean = (r0 + r1 + r2) / wp.float64(3.0)
-    slope = centred_hz[0] * (r0 - mean) + centred_hz[1] * (r1 - mean) + centred_hz[2] * (r2 - mean)
-    maps[0, p] = points[i][2] - m_per_rad_hz * slope
-    mag = wp.length((ph[0, i] + ph[1, i] + c3) / wp.float32(3.0))
+    depth, mag = slope_depth_at(ph[0, i], ph[1, i], ph[2, i], centred_hz, m_per_rad_hz, points[i][2])
+    maps[0, p] = depth
     maps[1, p] = wp.float64(mag)
     wp.atomic_max(peak, i % peak.shape[0], mag)
 
@@ -202,3 +209,135 @@ def reduce_peak(shards: wp.array(dtype=wp.float32), peak: wp.array(dtype=wp.floa
     for s in range(shards.shape[0]):
         m = wp.max(m, shards[s])
     peak[0] = m
+
+
+# MM-3FSK at a prior inside a frame graph (`frame_graph.FrameGraph` with a coarse pair): the coarse pair's
+# corrections, the median over the pixels the filter keeps (an exact radix select on quantised keys), every point
+# moved by that offset, then the three frequencies' slope depth. Launch sizes fixed; threads from count[0] on return.
+
+MEDIAN_BINS = 256           # one 8-bit digit of a 32-bit key per level
+MEDIAN_LEVELS = 4
+MEDIAN_KEYS = 4294967296.0  # 2^32 quantisation steps over the correction range
+
+
+@wp.kernel(enable_backward=False)
+def coarse_correction_counted(ph: wp.array2d(dtype=wp.vec2f), count: wp.array(dtype=wp.int32),
+                              m_per_rad: wp.float64, correction: wp.array(dtype=wp.float64),
+                              magnitude: wp.array(dtype=wp.float32), peak: wp.array(dtype=wp.float32)):
+    """MM-3FSK's coarse step: correction = `fsk.depth_correction_m` of the pair, magnitude = |(c1 + c2) / 2|
+    (`fsk.mean_phasor_magnitude`), peak = its maximum (shards, zeroed before)."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    c1 = ph[0, i]
+    c2 = ph[1, i]
+    correction[i] = pair_correction_m(c1, c2, m_per_rad)
+    mag = wp.length((c1 + c2) * wp.float32(0.5))
+    magnitude[i] = mag
+    wp.atomic_max(peak, i % peak.shape[0], mag)
+
+
+@wp.kernel(enable_backward=False)
+def median_keys(count: wp.array(dtype=wp.int32), correction: wp.array(dtype=wp.float64),
+                magnitude: wp.array(dtype=wp.float32), keep_ratio: wp.float64, peak: wp.array(dtype=wp.float32),
+                lo_m: wp.float64, width_m: wp.float64, keys: wp.array(dtype=wp.int64),
+                n_kept: wp.array(dtype=wp.int32)):
+    """key = the correction quantised to 2^32 steps over [lo_m, lo_m + width_m) (monotone: the k-th smallest key is
+    the k-th smallest correction's), -1 where `filtering.keep_mask` drops the pixel; n_kept counts the others
+    (zeroed before)."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    mag = magnitude[i]
+    if mag <= wp.float32(0.0) or wp.float64(mag) < wp.float64(peak[0]) * keep_ratio:
+        keys[i] = wp.int64(-1)
+        return
+    q = wp.floor((correction[i] - lo_m) / width_m * wp.float64(MEDIAN_KEYS))
+    q = wp.clamp(q, wp.float64(0.0), wp.float64(MEDIAN_KEYS) - wp.float64(1.0))
+    keys[i] = wp.int64(q)
+    wp.atomic_add(n_kept, 0, 1)
+
+
+@wp.kernel(enable_backward=False)
+def median_start(n_kept: wp.array(dtype=wp.int32), rank: wp.array(dtype=wp.int32),
+                 prefix: wp.array(dtype=wp.int64), hist: wp.array2d(dtype=wp.int32)):
+    """The two ranks np.median averages ((n - 1) // 2 and n // 2), empty prefixes, cleared histograms."""
+    s = wp.tid()
+    n = n_kept[0]
+    rank[s] = (n - 1 + s) // 2
+    prefix[s] = wp.int64(0)
+    for b in range(MEDIAN_BINS):
+        hist[s, b] = 0
+
+
+@wp.kernel(enable_backward=False)
+def median_histogram(count: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.int64), shift: int,
+                     prefix: wp.array(dtype=wp.int64), hist: wp.array2d(dtype=wp.int32)):
+    """Per rank s: histogram of the next 8-bit digit (bits shift .. shift + 7) of the kept keys whose higher bits
+    equal prefix[s]."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    key = keys[i]
+    if key < wp.int64(0):
+        return
+    digit = wp.int32((key >> wp.int64(shift)) & wp.int64(255))
+    high = key >> wp.int64(shift + 8)
+    for s in range(2):
+        if high == prefix[s]:
+            wp.atomic_add(hist, s, digit, 1)
+
+
+@wp.kernel(enable_backward=False)
+def median_digit(rank: wp.array(dtype=wp.int32), prefix: wp.array(dtype=wp.int64), hist: wp.array2d(dtype=wp.int32)):
+    """Per rank s: the digit whose bin holds the rank-th key; the prefix gains it, the rank drops by the keys below
+    it, the histogram is cleared for the next level."""
+    s = wp.tid()
+    below = int(0)  # noqa: UP018
+    digit = int(MEDIAN_BINS - 1)
+    found = int(0)  # noqa: UP018
+    for b in range(MEDIAN_BINS):
+        h = hist[s, b]
+        if found == 0 and rank[s] < below + h:
+            digit = b
+            found = 1
+        if found == 0:
+            below += h
+        hist[s, b] = 0
+    rank[s] = rank[s] - below
+    prefix[s] = (prefix[s] << wp.int64(8)) | wp.int64(digit)
+
+
+@wp.kernel(enable_backward=False)
+def shift_points_by_median(count: wp.array(dtype=wp.int32), n_kept: wp.array(dtype=wp.int32),
+                           prefix: wp.array(dtype=wp.int64), lo_m: wp.float64, width_m: wp.float64,
+                           points: wp.array(dtype=wp.vec3d), offset: wp.array(dtype=wp.float64)):
+    """offset = the mean of the two selected keys' bin centres (0 when nothing is kept: no shift); every point moves
+    to prior - offset."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    step = width_m / wp.float64(MEDIAN_KEYS)
+    off = wp.float64(0.0)
+    if n_kept[0] > 0:
+        off = lo_m + (wp.float64(prefix[0]) + wp.float64(prefix[1]) + wp.float64(1.0)) * wp.float64(0.5) * step
+    q = points[i]
+    points[i] = wp.vec3d(q[0], q[1], q[2] - off)
+    if i == 0:
+        offset[0] = off
+
+
+@wp.kernel(enable_backward=False)
+def slope_depth_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
+                        count: wp.array(dtype=wp.int32), centred_hz: wp.vec3d, m_per_rad_hz: wp.float64,
+                        points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
+                        peak: wp.array(dtype=wp.float32)):
+    """`slope_depth` over a launch of fixed size: threads from count[0] on do nothing."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    depth, mag = slope_depth_at(ph[0, i], ph[1, i], ph[2, i], centred_hz, m_per_rad_hz, points[i][2])
+    p = pixel[i]
+    maps[0, p] = depth
+    maps[1, p] = wp.float64(mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
