@@ -53,6 +53,7 @@ class GraphCorrelator:
         n_rx, n_tx, n_f = len(rx_m), len(tx_m), len(freqs_hz)
         self.device, self.freqs_hz, self.tx_m, self.rx_m = dev, freqs_hz, tx_m, rx_m
         self.raw_host = wp.empty((n_rx, n_tx, n_f), dtype=wp.vec2f, device="cpu", pinned=not dev.is_cpu)
+        self.raw_view = self.raw_host.numpy().view(np.complex64)[..., 0]      # made once: a frame only copies
         self.raw = wp.empty_like(self.raw_host, device=dev)
         self.gain_raw = wp.empty(n_f, dtype=wp.float32, device=dev)
         self.gain = wp.empty(n_f, dtype=wp.float32, device=dev)
@@ -69,7 +70,7 @@ class GraphCorrelator:
 
     def load(self, signal: np.ndarray) -> None:
         """Stage a frame's samples (n_rx, n_tx, F) for the next run."""
-        np.copyto(self.raw_host.numpy().view(np.complex64)[..., 0], signal, casting="same_kind")
+        np.copyto(self.raw_view, signal, casting="same_kind")
 
     def enqueue_tables(self) -> None:
         dev = self.device
@@ -88,7 +89,7 @@ class GraphCorrelator:
         dev, n = self.device, points.shape[0]
         empty = wp.empty(0, dtype=wp.float64, device=dev)
         if dev.is_cpu:
-            inputs = FrameInputs(self.raw_host.numpy().view(np.complex64)[..., 0], self.freqs_hz, self.tx_m,
+            inputs = FrameInputs(self.raw_view, self.freqs_hz, self.tx_m,
                                  self.rx_m, dev.alias)
             wp.launch(ck.correlate_separable, dim=n,
                       inputs=[0, points, empty, empty, empty, inputs.rx, inputs.tx_padded, inputs.k, inputs.cycles,
@@ -101,6 +102,32 @@ class GraphCorrelator:
                         inputs=[self.pts, self.rx4, self.tx4, self.k, self.gain, self.mat_h, self.common, 0, self.out,
                                 self.every if count is None else count], block_dim=ck.TC_BLOCK, device=dev)
         return self.out
+
+
+class HostMaps:
+    """The copy back of a graph's float64 maps (rows, n): row 1, the magnitude, comes back in float32 (exact: the
+    kernels compute it in float32), the other rows in float64; pinned host buffers, numpy views made once."""
+
+    def __init__(self, maps: wp.array):
+        dev = maps.device
+        rows, n = maps.shape
+        self.maps = maps
+        self.magnitude = wp.empty(n, dtype=wp.float32, device=dev)
+        pinned = not dev.is_cpu
+        self.hosts = [wp.empty(n, dtype=wp.float32 if r == 1 else wp.float64, device="cpu", pinned=pinned)
+                      for r in range(rows)]
+        self.views = [h.numpy() for h in self.hosts]
+
+    def enqueue(self) -> None:
+        """Launch the float32 conversion and the copies (in stream order, inside a capture)."""
+        wp.launch(fsk_kernels.magnitude_to_float32, dim=self.magnitude.shape[0], inputs=[self.maps, self.magnitude],
+                  device=self.maps.device)
+        for r, host in enumerate(self.hosts):
+            wp.copy(host, self.magnitude if r == 1 else self.maps[r])
+
+    def take(self, shape) -> list[np.ndarray]:
+        """Host copies of the rows, each reshaped to `shape` (after the device finished)."""
+        return [v.reshape(shape).copy() for v in self.views]
 
 
 class MedianOffset:
@@ -179,7 +206,6 @@ class FrameGraph(CapturedLaunches):
         self.depth_host = wp.empty((height, width), dtype=wp.uint16, device="cpu", pinned=pinned)
         self.mask_host = wp.empty((height, width) if depth.mask is not None else (1, 1), dtype=wp.uint8,
                                   device="cpu", pinned=pinned)
-        self.maps_host = wp.empty((3, n_px), dtype=wp.float64, device="cpu", pinned=pinned)
         self.stats_host = wp.empty(2, dtype=wp.int32, device="cpu", pinned=pinned)
         self.slot_host = wp.empty(1, dtype=wp.int32, device="cpu", pinned=pinned)
         self.roi_host = wp.empty(n_px, dtype=wp.uint8, device="cpu", pinned=pinned)
@@ -195,6 +221,7 @@ class FrameGraph(CapturedLaunches):
         self.points = wp.zeros(n_px, dtype=wp.vec3d, device=dev)          # unused slots: finite points
         self.pixel = wp.zeros(n_px, dtype=wp.int32, device=dev)
         self.maps = wp.empty((3, n_px), dtype=wp.float64, device=dev)
+        self.maps_back = HostMaps(self.maps)
         self.coarse = None if coarse is None else list(coarse)
         pair_hz = freqs_hz if coarse is None else freqs_hz[self.coarse]
         self.correlator = GraphCorrelator(dev, n_px, pair_hz, tx_m, rx_m)
@@ -206,6 +233,10 @@ class FrameGraph(CapturedLaunches):
             centred_hz = offsets_hz - offsets_hz.mean()
             self.centred = wp.vec3d(*(centred_hz / (centred_hz @ centred_hz)))
         self.offset_host = wp.zeros(1, dtype=wp.float64, device="cpu", pinned=pinned)
+        # numpy views of the staging buffers, made once (a frame only copies into / out of them)
+        self.roi_view, self.depth_view, self.mask_view, self.stats_view, self.slot_view, self.offset_view = (
+            a.numpy() for a in (self.roi_host, self.depth_host, self.mask_host, self.stats_host, self.slot_host,
+                                self.offset_host))
         k = depth.intrinsics
         self.cam = prior_kernels.vec9d(k.fx, k.fy, k.cx, k.cy, depth.depth_scale_m * 1000.0, *pixel_scale(grid))
         self.xf = wp.mat44d(*np.asarray(realsense2radar, dtype=np.float64).ravel())
@@ -249,7 +280,7 @@ class FrameGraph(CapturedLaunches):
         wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
         wp.launch(fsk_kernels.magnitude_filter_counted, dim=n_px,
                   inputs=[self.pixel, self.slot, self.keep_ratio, self.peak, self.maps], device=dev)
-        wp.copy(self.maps_host, self.maps)
+        self.maps_back.enqueue()
         wp.copy(self.stats_host, self.stats, count=2)
         wp.copy(self.slot_host, self.slot)
         if self.coarse is not None:
@@ -273,28 +304,28 @@ class FrameGraph(CapturedLaunches):
 
     def run(self, depth, signal: np.ndarray, roi_pixels: np.ndarray | None = None
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
-        """(depth_m, magnitude, prior_m) (ny, nx) NaN where none, the prior's covered pixels and those correlated
-        (inside `roi_pixels` (ny, nx) bool, None = all) of a new frame: its depth frame (the setting's size) and
-        samples (n_rx, n_tx, F) at the setting's frequencies. With a coarse pair, `offset_m` then holds the
+        """(depth_m, magnitude (float32), prior_m) (ny, nx) NaN where none, the prior's covered pixels and those
+        correlated (inside `roi_pixels` (ny, nx) bool, None = all) of a new frame: its depth frame (the setting's
+        size) and samples (n_rx, n_tx, F) at the setting's frequencies. With a coarse pair, `offset_m` then holds the
         frame's prior offset (m)."""
-        np.copyto(self.roi_host.numpy(), 1 if roi_pixels is None else roi_pixels.ravel(), casting="unsafe")
-        np.copyto(self.depth_host.numpy(), depth.depth_mm, casting="unsafe")
+        np.copyto(self.roi_view, 1 if roi_pixels is None else roi_pixels.ravel(), casting="unsafe")
+        np.copyto(self.depth_view, depth.depth_mm, casting="unsafe")
         if self.use_mask:
-            np.copyto(self.mask_host.numpy(), depth.mask, casting="unsafe")
+            np.copyto(self.mask_view, depth.mask, casting="unsafe")
         if self.coarse is None:
             self.correlator.load(signal)
         else:
             self.correlator.load(signal[:, :, self.coarse])
             self.fine_correlator.load(signal)
         self._replay()
-        maps = self.maps_host.numpy().reshape(3, *self.shape).copy()
-        n_covered, n_filled = (int(v) for v in self.stats_host.numpy())
-        return maps[0], maps[1], maps[2], n_covered + n_filled, int(self.slot_host.numpy()[0])
+        depth_m, magnitude, prior_m = self.maps_back.take(self.shape)
+        n_covered, n_filled = (int(v) for v in self.stats_view)
+        return depth_m, magnitude, prior_m, n_covered + n_filled, int(self.slot_view[0])
 
     @property
     def offset_m(self) -> float:
         """MM-3FSK's prior offset of the last frame run (m): the median coarse correction (0 if none kept)."""
-        return float(self.offset_host.numpy()[0])
+        return float(self.offset_view[0])
 
 
 def frame_graph(buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, keep_ratio,
@@ -316,7 +347,8 @@ class FskGraph(CapturedLaunches):
     """2FSK or 3FSK over a fixed pixel list as one CUDA graph (`warp_backend.fsk.two_pass` / `three_fsk`'s launches
     on fixed buffers): the pair's (2FSK: both frequencies; 3FSK: the coarse pair) pass 1 at the scalar prior,
     the strongest pixel, the refocused pass 2, then 2FSK's pair depth or 3FSK's coarse step, third correlation and
-    slope, and the filter; `run(signal)` -> (maps (2 or 3, ny, nx), (z1_m, reference pixel))."""
+    slope, and the filter; `run(signal)` -> (maps: depth, magnitude (float32)[, coarse depth], each (ny, nx); (z1_m,
+    reference pixel))."""
 
     def __init__(self, buffers, grid, flat_pixels: np.ndarray, freqs_hz, pair: list[int], three: bool, tx_m, rx_m,
                  prior_m: float, keep_ratio: float, first_only: bool):
@@ -329,7 +361,7 @@ class FskGraph(CapturedLaunches):
         self.pixel = wp.array(flat_pixels.astype(np.int32), dtype=wp.int32, device=dev)
         self.points = wp.zeros(n, dtype=wp.vec3d, device=dev)
         self.maps = wp.empty((rows, ny * nx), dtype=wp.float64, device=dev)
-        self.maps_host = wp.empty((rows, ny * nx), dtype=wp.float64, device="cpu", pinned=pinned)
+        self.maps_back = HostMaps(self.maps)
         self.scalars = wp.empty(2, dtype=wp.float64, device=dev)
         self.scalars_host = wp.empty(2, dtype=wp.float64, device="cpu", pinned=pinned)
         self.first_peak = wp.empty(1, dtype=wp.float32, device=dev)
@@ -378,17 +410,17 @@ class FskGraph(CapturedLaunches):
         wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
         wp.launch(fsk_kernels.magnitude_filter, dim=n, inputs=[self.pixel, self.keep_ratio, self.peak, self.maps],
                   device=dev)
-        wp.copy(self.maps_host, self.maps)
+        self.maps_back.enqueue()
         wp.copy(self.scalars_host, self.scalars)
 
-    def run(self, signal: np.ndarray) -> tuple[np.ndarray, tuple[float, int]]:
-        """Maps (rows, ny, nx) (depth, magnitude[, coarse depth]) and (z1_m, reference pixel) of a frame."""
+    def run(self, signal: np.ndarray) -> tuple[list[np.ndarray], tuple[float, int]]:
+        """Maps (depth, magnitude[, coarse depth]) and (z1_m, reference pixel) of a frame."""
         self.pair_correlator.load(signal if self.pair == list(range(signal.shape[2])) else signal[:, :, self.pair])
         if self.three:
             self.all_correlator.load(signal)
         self._replay()
         z1_m, ref = self.scalars_host.numpy()
-        return self.maps_host.numpy().reshape(-1, *self.shape).copy(), (float(z1_m), int(ref))
+        return self.maps_back.take(self.shape), (float(z1_m), int(ref))
 
 
 def fsk_graph(buffers, grid, pixels: np.ndarray, freqs_hz, pair: list[int], three: bool, tx_m, rx_m, prior_m: float,

@@ -341,3 +341,10 @@ def slope_depth_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp
     maps[0, p] = depth
     maps[1, p] = wp.float64(mag)
     wp.atomic_max(peak, i % peak.shape[0], mag)
+
+
+@wp.kernel(enable_backward=False)
+def magnitude_to_float32(maps: wp.array2d(dtype=wp.float64), magnitude: wp.array(dtype=wp.float32)):
+    """magnitude = maps[1] in float32: exact, every magnitude is a float32 value (NaN stays NaN)."""
+    p = wp.tid()
+    magnitude[p] = wp.float32(maps[1, p])
