@@ -259,6 +259,8 @@ class FrameGraph(CapturedLaunches):
         wp.copy(self.m_img, self.mask_host)
         wp.copy(self.roi, self.roi_host)
         self.correlator.enqueue_tables()
+        if self.coarse is not None:           # the fine pass's samples and tables (on CUDA built here, not on the host)
+            self.fine_correlator.enqueue_tables()
         self.slot.zero_()
         self.shards.zero_()
         wp.launch(prior_kernels.clear_zbuffer, dim=n_px, inputs=[ny, self.zbuf, self.stats], device=dev)
