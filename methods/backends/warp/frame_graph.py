@@ -30,7 +30,7 @@ from methods.backends.warp.kernels import tables as table_kernels
 from methods.backends.warp.prior import pixel_scale
 
 GRAPHS_KEPT = 4
-PEAK_SHARDS = 256          # partial maxima of the magnitude (fsk_kernels.reduce_peak)
+PEAK_SHARDS = int(fsk_kernels.PEAK_SHARDS)     # partial maxima of the magnitude (fsk_kernels.reduce_peak)
 _GRAPHS: dict = {}
 
 
@@ -42,6 +42,11 @@ def graph_key(depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx_m, rx_m, k
             float(depth.depth_scale_m), np.asarray(realsense2radar, dtype=np.float64).tobytes(), grid,
             max_jump_mm, np.asarray(freqs_hz, dtype=np.float64).tobytes(), tx_m.tobytes(), rx_m.tobytes(),
             float(keep_ratio), None if coarse is None else tuple(coarse))
+
+
+def reduce_peak(shards: wp.array, peak: wp.array, dev) -> None:
+    """peak[0] = the maximum of the PEAK_SHARDS shards (one block)."""
+    wp.launch_tiled(fsk_kernels.reduce_peak, dim=[1], inputs=[shards, peak], block_dim=PEAK_SHARDS, device=dev)
 
 
 class GraphCorrelator:
@@ -78,8 +83,8 @@ class GraphCorrelator:
         if dev.is_cpu:
             return
         self.gain_raw.zero_()
-        wp.launch(table_kernels.signal_gain, dim=self.raw.shape, inputs=[self.raw, self.scale, self.gain_raw],
-                  device=dev)
+        wp.launch(table_kernels.signal_gain, dim=(self.raw.shape[2], table_kernels.GAIN_LANES),
+                  inputs=[self.raw, self.scale, self.gain_raw], device=dev)
         wp.launch(table_kernels.tx_half_table, dim=self.mat_h.shape,
                   inputs=[self.raw, self.scale, self.gain_raw, self.gain, self.mat_h], device=dev)
 
@@ -141,9 +146,10 @@ class MedianOffset:
         self.lo_m, self.width_m = wp.float64(-3.2 * m_per_rad), wp.float64(6.4 * m_per_rad)
         self.keys = wp.empty(n, dtype=wp.int64, device=dev)
         self.n_kept = wp.empty(1, dtype=wp.int32, device=dev)
-        self.rank = wp.empty(2, dtype=wp.int32, device=dev)
-        self.prefix = wp.empty(2, dtype=wp.int64, device=dev)
-        self.hist = wp.empty((2, fsk_kernels.MEDIAN_BINS), dtype=wp.int32, device=dev)
+        levels = fsk_kernels.MEDIAN_LEVELS
+        self.rank = wp.empty((levels + 1, 2), dtype=wp.int32, device=dev)
+        self.prefix = wp.zeros((levels + 1, 2), dtype=wp.int64, device=dev)
+        self.hist = wp.empty((levels, 2, fsk_kernels.MEDIAN_BINS), dtype=wp.int32, device=dev)
         self.offset = wp.zeros(1, dtype=wp.float64, device=dev)
 
     @property
@@ -156,12 +162,14 @@ class MedianOffset:
         self.n_kept.zero_()
         wp.launch(fsk_kernels.median_keys, dim=n, inputs=[count, correction, magnitude, keep_ratio, peak, self.lo_m,
                                                           self.width_m, self.keys, self.n_kept], device=dev)
-        wp.launch(fsk_kernels.median_start, dim=2, inputs=[self.n_kept, self.rank, self.prefix, self.hist], device=dev)
+        self.hist.zero_()
+        wp.launch(fsk_kernels.median_start, dim=2, inputs=[self.n_kept, self.rank, self.prefix], device=dev)
         for level in range(fsk_kernels.MEDIAN_LEVELS):
             shift = 8 * (fsk_kernels.MEDIAN_LEVELS - 1 - level)
-            wp.launch(fsk_kernels.median_histogram, dim=n, inputs=[count, self.keys, shift, self.prefix, self.hist],
-                      device=dev)
-            wp.launch(fsk_kernels.median_digit, dim=2, inputs=[self.rank, self.prefix, self.hist], device=dev)
+            wp.launch(fsk_kernels.median_histogram, dim=n, inputs=[count, self.keys, shift, level, self.prefix,
+                                                                   self.hist], device=dev)
+            wp.launch(fsk_kernels.median_digit, dim=(2, fsk_kernels.MEDIAN_BINS),
+                      inputs=[level, self.rank, self.prefix, self.hist], device=dev)
         wp.launch(fsk_kernels.shift_points_by_median, dim=n,
                   inputs=[count, self.n_kept, self.prefix, self.lo_m, self.width_m, points, self.offset], device=dev)
 
@@ -279,7 +287,7 @@ class FrameGraph(CapturedLaunches):
                       inputs=[ph, self.pixel, self.slot, self.m_per_rad, self.maps, self.shards], device=dev)
         else:
             self._enqueue_mm3fsk(ph)
-        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
+        reduce_peak(self.shards, self.peak, dev)
         wp.launch(fsk_kernels.magnitude_filter_counted, dim=n_px,
                   inputs=[self.pixel, self.slot, self.keep_ratio, self.peak, self.maps], device=dev)
         self.maps_back.enqueue()
@@ -295,7 +303,7 @@ class FrameGraph(CapturedLaunches):
         wp.launch(fsk_kernels.coarse_correction_counted, dim=n_px,
                   inputs=[ph, self.slot, self.m_per_rad, self.correction, self.coarse_magnitude, self.shards],
                   device=dev)
-        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
+        reduce_peak(self.shards, self.peak, dev)
         self.shards.zero_()
         self.median.enqueue(self.slot, self.correction, self.coarse_magnitude, self.keep_ratio, self.peak,
                             self.points)
@@ -394,7 +402,7 @@ class FskGraph(CapturedLaunches):
                                                               self.points], device=dev)
         ph = self.pair_correlator.enqueue(self.points)
         wp.launch(fsk_kernels.first_magnitude_peak, dim=n, inputs=[ph, self.first_shards], device=dev)
-        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.first_shards, self.first_peak], device=dev)
+        reduce_peak(self.first_shards, self.first_peak, dev)
         wp.launch(fsk_kernels.first_argmax, dim=n, inputs=[ph, self.first_peak, self.ref], device=dev)
         wp.launch(fsk_kernels.refocus_points, dim=n, inputs=[ph, self.ref, self.prior_m, self.m_per_rad, self.points,
                                                              self.scalars], device=dev)
@@ -409,7 +417,7 @@ class FskGraph(CapturedLaunches):
         else:
             wp.launch(fsk_kernels.pair_depth, dim=n, inputs=[ph, self.pixel, self.m_per_rad, self.first_only,
                                                              self.points, self.maps, self.shards], device=dev)
-        wp.launch(fsk_kernels.reduce_peak, dim=1, inputs=[self.shards, self.peak], device=dev)
+        reduce_peak(self.shards, self.peak, dev)
         wp.launch(fsk_kernels.magnitude_filter, dim=n, inputs=[self.pixel, self.keep_ratio, self.peak, self.maps],
                   device=dev)
         self.maps_back.enqueue()

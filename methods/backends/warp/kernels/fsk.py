@@ -201,14 +201,15 @@ def magnitude_filter_counted(pixel: wp.array(dtype=wp.int32), count: wp.array(dt
         maps[0, p] = wp.float64(wp.nan)
 
 
+PEAK_SHARDS = wp.constant(256)   # partial maxima of the magnitude (the kernels' shards arrays; reduce_peak)
+
+
 @wp.kernel(enable_backward=False)
 def reduce_peak(shards: wp.array(dtype=wp.float32), peak: wp.array(dtype=wp.float32)):
-    """peak[0] = max of the shards: the kernels above take the maximum into shards[i % n_shards] (a float atomic
-    max is a compare-and-swap loop; 90 k threads on one address cost ~0.1 ms on the H100), one thread combines."""
-    m = wp.float32(0.0)
-    for s in range(shards.shape[0]):
-        m = wp.max(m, shards[s])
-    peak[0] = m
+    """peak[0] = max of the PEAK_SHARDS shards: the kernels above take the maximum into shards[i % n_shards] (a
+    float atomic max is a compare-and-swap loop; 90 k threads on one address cost ~0.1 ms on the H100); one block
+    reduces them (launch_tiled, block_dim PEAK_SHARDS: 1-2 us on the H100 against 10-18 us for one thread's loop)."""
+    wp.tile_store(peak, wp.tile_max(wp.tile_load(shards, shape=PEAK_SHARDS)))
 
 
 # MM-3FSK at a prior inside a frame graph (`frame_graph.FrameGraph` with a coarse pair): the coarse pair's
@@ -259,22 +260,21 @@ def median_keys(count: wp.array(dtype=wp.int32), correction: wp.array(dtype=wp.f
 
 
 @wp.kernel(enable_backward=False)
-def median_start(n_kept: wp.array(dtype=wp.int32), rank: wp.array(dtype=wp.int32),
-                 prefix: wp.array(dtype=wp.int64), hist: wp.array2d(dtype=wp.int32)):
-    """The two ranks np.median averages ((n - 1) // 2 and n // 2), empty prefixes, cleared histograms."""
+def median_start(n_kept: wp.array(dtype=wp.int32), rank: wp.array2d(dtype=wp.int32),
+                 prefix: wp.array2d(dtype=wp.int64)):
+    """Level 0 of the select: the two ranks np.median averages ((n - 1) // 2 and n // 2), empty prefixes; the
+    histograms (levels, 2, MEDIAN_BINS) are zeroed by the caller."""
     s = wp.tid()
     n = n_kept[0]
-    rank[s] = (n - 1 + s) // 2
-    prefix[s] = wp.int64(0)
-    for b in range(MEDIAN_BINS):
-        hist[s, b] = 0
+    rank[0, s] = (n - 1 + s) // 2
+    prefix[0, s] = wp.int64(0)
 
 
 @wp.kernel(enable_backward=False)
-def median_histogram(count: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.int64), shift: int,
-                     prefix: wp.array(dtype=wp.int64), hist: wp.array2d(dtype=wp.int32)):
-    """Per rank s: histogram of the next 8-bit digit (bits shift .. shift + 7) of the kept keys whose higher bits
-    equal prefix[s]."""
+def median_histogram(count: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.int64), shift: int, level: int,
+                     prefix: wp.array2d(dtype=wp.int64), hist: wp.array3d(dtype=wp.int32)):
+    """Per rank s: histogram (this level's) of the next 8-bit digit (bits shift .. shift + 7) of the kept keys whose
+    higher bits equal the level's prefix[s]."""
     i = wp.tid()
     if i >= count[0]:
         return
@@ -284,43 +284,41 @@ def median_histogram(count: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.in
     digit = wp.int32((key >> wp.int64(shift)) & wp.int64(255))
     high = key >> wp.int64(shift + 8)
     for s in range(2):
-        if high == prefix[s]:
-            wp.atomic_add(hist, s, digit, 1)
+        if high == prefix[level, s]:
+            wp.atomic_add(hist, level, s, digit, 1)
 
 
 @wp.kernel(enable_backward=False)
-def median_digit(rank: wp.array(dtype=wp.int32), prefix: wp.array(dtype=wp.int64), hist: wp.array2d(dtype=wp.int32)):
-    """Per rank s: the digit whose bin holds the rank-th key; the prefix gains it, the rank drops by the keys below
-    it, the histogram is cleared for the next level."""
-    s = wp.tid()
+def median_digit(level: int, rank: wp.array2d(dtype=wp.int32), prefix: wp.array2d(dtype=wp.int64),
+                 hist: wp.array3d(dtype=wp.int32)):
+    """Thread (s, b): if bin b of this level holds the rank-th key of rank s, the next level's prefix gains digit b
+    and its rank drops by the keys below the bin (one thread per rank matches; the bins are summed in parallel,
+    so nothing here waits on another thread: each level has its own histogram, ranks and prefixes)."""
+    s, b = wp.tid()
     below = int(0)  # noqa: UP018
-    digit = int(MEDIAN_BINS - 1)
-    found = int(0)  # noqa: UP018
-    for b in range(MEDIAN_BINS):
-        h = hist[s, b]
-        if found == 0 and rank[s] < below + h:
-            digit = b
-            found = 1
-        if found == 0:
-            below += h
-        hist[s, b] = 0
-    rank[s] = rank[s] - below
-    prefix[s] = (prefix[s] << wp.int64(8)) | wp.int64(digit)
+    for c in range(b):
+        below += hist[level, s, c]
+    r = rank[level, s]
+    if below <= r and r < below + hist[level, s, b]:
+        rank[level + 1, s] = r - below
+        prefix[level + 1, s] = (prefix[level, s] << wp.int64(8)) | wp.int64(b)
 
 
 @wp.kernel(enable_backward=False)
 def shift_points_by_median(count: wp.array(dtype=wp.int32), n_kept: wp.array(dtype=wp.int32),
-                           prefix: wp.array(dtype=wp.int64), lo_m: wp.float64, width_m: wp.float64,
+                           prefix: wp.array2d(dtype=wp.int64), lo_m: wp.float64, width_m: wp.float64,
                            points: wp.array(dtype=wp.vec3d), offset: wp.array(dtype=wp.float64)):
-    """offset = the mean of the two selected keys' bin centres (0 when nothing is kept: no shift); every point moves
-    to prior - offset."""
+    """offset = the mean of the two selected keys' bin centres (the last level's prefixes; 0 when nothing is kept: no
+    shift); every point moves to prior - offset."""
     i = wp.tid()
     if i >= count[0]:
         return
     step = width_m / wp.float64(MEDIAN_KEYS)
     off = wp.float64(0.0)
     if n_kept[0] > 0:
-        off = lo_m + (wp.float64(prefix[0]) + wp.float64(prefix[1]) + wp.float64(1.0)) * wp.float64(0.5) * step
+        last = prefix.shape[0] - 1
+        off = lo_m + (wp.float64(prefix[last, 0]) + wp.float64(prefix[last, 1]) + wp.float64(1.0)) * wp.float64(0.5) \
+            * step
     q = points[i]
     points[i] = wp.vec3d(q[0], q[1], q[2] - off)
     if i == 0:
