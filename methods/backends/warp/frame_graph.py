@@ -255,6 +255,7 @@ class FrameGraph(CapturedLaunches):
         if coarse is not None:
             self.median = MedianOffset(dev, n_px, self.m_per_rad)
         self.keep_ratio = float(keep_ratio)
+        self._roi_all = False                                   # whether roi_host holds all ones
         self._capture()
 
     def _enqueue(self) -> None:
@@ -318,10 +319,13 @@ class FrameGraph(CapturedLaunches):
         correlated (inside `roi_pixels` (ny, nx) bool, None = all) of a new frame: its depth frame (the setting's
         size) and samples (n_rx, n_tx, F) at the setting's frequencies. With a coarse pair, `offset_m` then holds the
         frame's prior offset (m)."""
-        np.copyto(self.roi_view, 1 if roi_pixels is None else roi_pixels.ravel(), casting="unsafe")
+        if roi_pixels is not None or not self._roi_all:        # all ones stays staged from the last such frame
+            np.copyto(self.roi_view, 1 if roi_pixels is None else roi_pixels.ravel(), casting="unsafe")
+            self._roi_all = roi_pixels is None
         np.copyto(self.depth_view, depth.depth_mm, casting="unsafe")
-        if self.use_mask:
-            np.copyto(self.mask_view, depth.mask, casting="unsafe")
+        if self.use_mask:                                       # a bool mask's bytes are the 0/1 staged: a memcpy
+            mask = depth.mask
+            np.copyto(self.mask_view, mask.view(np.uint8) if mask.dtype == np.bool_ else mask, casting="unsafe")
         if self.coarse is None:
             self.correlator.load(signal)
         else:
