@@ -296,8 +296,8 @@ def median_digit(level: int, rank: wp.array2d(dtype=wp.int32), prefix: wp.array2
     so nothing here waits on another thread: each level has its own histogram, ranks and prefixes)."""
     s, b = wp.tid()
     below = int(0)  # noqa: UP018
-    for c in range(b):
-        below += hist[level, s, c]
+    for c in range(MEDIAN_BINS):            # a constant trip count with unconditional loads: unrolled, pipelined
+        below += wp.where(c < b, hist[level, s, c], 0)
     r = rank[level, s]
     if below <= r and r < below + hist[level, s, b]:
         rank[level + 1, s] = r - below
