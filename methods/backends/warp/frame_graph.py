@@ -88,24 +88,26 @@ class GraphCorrelator:
         wp.launch(table_kernels.tx_half_table, dim=self.mat_h.shape,
                   inputs=[self.raw, self.scale, self.gain_raw, self.gain, self.mat_h], device=dev)
 
-    def enqueue(self, points: wp.array, count: wp.array | None = None) -> wp.array:
+    def enqueue(self, points: wp.array, count: wp.array | None = None, n_freqs: int | None = None) -> wp.array:
         """Phasors (F, n) of the n points into `out`; with `count` (device int32) only of the first count[0]
-        (the tensor-core blocks past it return at once; Warp-CPU computes them all)."""
+        (the tensor-core blocks past it return at once; Warp-CPU computes them all); with `n_freqs` only the first
+        n_freqs frequencies' rows (the same values: each frequency is summed on its own)."""
         dev, n = self.device, points.shape[0]
+        f = len(self.freqs_hz) if n_freqs is None else n_freqs
         empty = wp.empty(0, dtype=wp.float64, device=dev)
         if dev.is_cpu:
             inputs = FrameInputs(self.raw_view, self.freqs_hz, self.tx_m,
                                  self.rx_m, dev.alias)
             wp.launch(ck.correlate_separable, dim=n,
-                      inputs=[0, points, empty, empty, empty, inputs.rx, inputs.tx_padded, inputs.k, inputs.cycles,
-                              inputs.signal_padded, 0, self.out], device=dev)
+                      inputs=[0, points, empty, empty, empty, inputs.rx, inputs.tx_padded, inputs.k[:f],
+                              inputs.cycles[:f], inputs.signal_padded[:f], 0, self.out], device=dev)
             return self.out
-        wp.launch(ck.prepare_points, dim=n, inputs=[0, points, empty, empty, empty, self.cycles, self.pts,
+        wp.launch(ck.prepare_points, dim=n, inputs=[0, points, empty, empty, empty, self.cycles[:f], self.pts,
                                                     self.common], device=dev)
         n_blocks = (n + int(ck.TC2_POINTS) - 1) // int(ck.TC2_POINTS)
         wp.launch_tiled(ck.correlate_tiles_tx_halves, dim=[n_blocks],
-                        inputs=[self.pts, self.rx4, self.tx4, self.k, self.gain, self.mat_h, self.common, 0, self.out,
-                                self.every if count is None else count], block_dim=ck.TC_BLOCK, device=dev)
+                        inputs=[self.pts, self.rx4, self.tx4, self.k[:f], self.gain, self.mat_h, self.common, 0,
+                                self.out, self.every if count is None else count], block_dim=ck.TC_BLOCK, device=dev)
         return self.out
 
 
@@ -383,6 +385,7 @@ class FskGraph(CapturedLaunches):
         self.first_shards = wp.empty(PEAK_SHARDS, dtype=wp.float32, device=dev)
         self.shards = wp.empty(PEAK_SHARDS, dtype=wp.float32, device=dev)
         self.ref = wp.empty(1, dtype=wp.int32, device=dev)
+        self.ref_point = wp.zeros(1, dtype=wp.vec3d, device=dev)
         self.x_m, self.y_m = grid_arrays(buffers, grid)
         self.pair_correlator = GraphCorrelator(dev, n, freqs_hz[pair], tx_m, rx_m)
         self.all_correlator = GraphCorrelator(dev, n, freqs_hz, tx_m, rx_m) if three else None
@@ -404,12 +407,16 @@ class FskGraph(CapturedLaunches):
             self.all_correlator.enqueue_tables()
         wp.launch(fsk_kernels.points_at_depth, dim=n, inputs=[self.pixel, nx, self.x_m, self.y_m, self.prior_m,
                                                               self.points], device=dev)
-        ph = self.pair_correlator.enqueue(self.points)
+        # pass 1 needs |c1| everywhere but c2 only at the strongest pixel: the first frequency over every point, then
+        # the pair at that one point (each point and frequency is summed on its own: the values are the full pass's)
+        ph = self.pair_correlator.enqueue(self.points, n_freqs=1)
         wp.launch(fsk_kernels.first_magnitude_peak, dim=n, inputs=[ph, self.first_shards], device=dev)
         reduce_peak(self.first_shards, self.first_peak, dev)
         wp.launch(fsk_kernels.first_argmax, dim=n, inputs=[ph, self.first_peak, self.ref], device=dev)
-        wp.launch(fsk_kernels.refocus_points, dim=n, inputs=[ph, self.ref, self.prior_m, self.m_per_rad, self.points,
-                                                             self.scalars], device=dev)
+        wp.launch(fsk_kernels.reference_point, dim=1, inputs=[self.ref, self.points, self.ref_point], device=dev)
+        ph = self.pair_correlator.enqueue(self.ref_point)
+        wp.launch(fsk_kernels.refocus_points_from_first, dim=n,
+                  inputs=[ph, self.ref, self.prior_m, self.m_per_rad, self.points, self.scalars], device=dev)
         ph = self.pair_correlator.enqueue(self.points)
         if self.three:
             wp.launch(fsk_kernels.coarse_points, dim=n, inputs=[ph, self.pixel, self.m_per_rad, self.points,

@@ -112,6 +112,27 @@ def refocus_points(ph: wp.array2d(dtype=wp.vec2f), ref: wp.array(dtype=wp.int32)
 
 
 @wp.kernel(enable_backward=False)
+def reference_point(ref: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3d),
+                    ref_point: wp.array(dtype=wp.vec3d)):
+    """ref_point[0] = the point of pass 1's strongest pixel."""
+    ref_point[0] = points[ref[0]]
+
+
+@wp.kernel(enable_backward=False)
+def refocus_points_from_first(ph: wp.array2d(dtype=wp.vec2f), ref: wp.array(dtype=wp.int32), z0_m: wp.float64,
+                              m_per_rad: wp.float64, points: wp.array(dtype=wp.vec3d),
+                              scalars: wp.array(dtype=wp.float64)):
+    """`refocus_points` with the strongest pixel's pair phasors in column 0 of `ph` (a one-point correlation)."""
+    i = wp.tid()
+    z1 = z0_m - pair_correction_m(ph[0, 0], ph[1, 0], m_per_rad)
+    q = points[i]
+    points[i] = wp.vec3d(q[0], q[1], z1)
+    if i == 0:
+        scalars[0] = z1
+        scalars[1] = wp.float64(ref[0])
+
+
+@wp.kernel(enable_backward=False)
 def pair_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
                first_only: int, points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
                peak: wp.array(dtype=wp.float32)):
