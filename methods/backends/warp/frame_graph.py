@@ -83,8 +83,7 @@ class GraphCorrelator:
         if dev.is_cpu:
             return
         self.gain_raw.zero_()
-        wp.launch(table_kernels.signal_gain, dim=(self.raw.shape[2], table_kernels.GAIN_LANES),
-                  inputs=[self.raw, self.scale, self.gain_raw], device=dev)
+        table_kernels.launch_signal_gain(self.raw, self.scale, self.gain_raw, dev)
         wp.launch(table_kernels.tx_half_table, dim=self.mat_h.shape,
                   inputs=[self.raw, self.scale, self.gain_raw, self.gain, self.mat_h], device=dev)
 

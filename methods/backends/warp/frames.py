@@ -166,8 +166,7 @@ class FrameInputs:
             gain = wp.empty(self.n_freqs, dtype=wp.float32, device=dev)
             mat_h = wp.empty((self.n_freqs, 2, int(TC_ANT), int(TC2_KP)), dtype=wp.float16, device=dev)
             scale = wp.float32(self.scale)
-            wp.launch(table_kernels.signal_gain, dim=(self.n_freqs, table_kernels.GAIN_LANES),
-                      inputs=[raw, scale, gain_raw], device=dev)
+            table_kernels.launch_signal_gain(raw, scale, gain_raw, dev)
             wp.launch(table_kernels.tx_half_table, dim=mat_h.shape, inputs=[raw, scale, gain_raw, gain, mat_h],
                       device=dev)
             return gain, mat_h
