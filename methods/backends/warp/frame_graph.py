@@ -151,6 +151,8 @@ class MedianOffset:
         self.rank = wp.empty((levels + 1, 2), dtype=wp.int32, device=dev)
         self.prefix = wp.zeros((levels + 1, 2), dtype=wp.int64, device=dev)
         self.hist = wp.empty((levels, 2, fsk_kernels.MEDIAN_BINS), dtype=wp.int32, device=dev)
+        self.groups = wp.empty((levels, 2, fsk_kernels.MEDIAN_BINS // fsk_kernels.MEDIAN_GROUP), dtype=wp.int32,
+                               device=dev)
         self.offset = wp.zeros(1, dtype=wp.float64, device=dev)
 
     @property
@@ -169,8 +171,10 @@ class MedianOffset:
             shift = 8 * (fsk_kernels.MEDIAN_LEVELS - 1 - level)
             wp.launch(fsk_kernels.median_histogram, dim=n, inputs=[count, self.keys, shift, level, self.prefix,
                                                                    self.hist], device=dev)
+            wp.launch(fsk_kernels.median_groups, dim=self.groups.shape[1:], inputs=[level, self.hist, self.groups],
+                      device=dev)
             wp.launch(fsk_kernels.median_digit, dim=(2, fsk_kernels.MEDIAN_BINS),
-                      inputs=[level, self.rank, self.prefix, self.hist], device=dev)
+                      inputs=[level, self.rank, self.prefix, self.hist, self.groups], device=dev)
         wp.launch(fsk_kernels.shift_points_by_median, dim=n,
                   inputs=[count, self.n_kept, self.prefix, self.lo_m, self.width_m, points, self.offset], device=dev)
 
