@@ -399,7 +399,9 @@ class FskGraph(CapturedLaunches):
         self.prior_m, self.keep_ratio, self.first_only = float(prior_m), float(keep_ratio), int(first_only)
         self._capture()
 
-    def _enqueue(self) -> None:
+    def _first_pass(self) -> None:
+        """Clear the outputs, build the tables, pass 1 at the scalar prior and the common guess z1 (scalars; every
+        point moved there)."""
         dev, n, nx = self.device, self.points.shape[0], self.shape[1]
         self.maps.fill_(float("nan"))
         self.first_shards.zero_()
@@ -420,6 +422,10 @@ class FskGraph(CapturedLaunches):
         ph = self.pair_correlator.enqueue(self.ref_point)
         wp.launch(fsk_kernels.refocus_points_from_first, dim=n,
                   inputs=[ph, self.ref, self.prior_m, self.m_per_rad, self.points, self.scalars], device=dev)
+
+    def _enqueue(self) -> None:
+        dev, n = self.device, self.points.shape[0]
+        self._first_pass()
         ph = self.pair_correlator.enqueue(self.points)
         if self.three:
             wp.launch(fsk_kernels.coarse_points, dim=n, inputs=[ph, self.pixel, self.m_per_rad, self.points,
@@ -447,14 +453,99 @@ class FskGraph(CapturedLaunches):
         return self.maps_back.take(self.shape), (float(z1_m), int(ref))
 
 
+class KeptFskGraph(FskGraph):
+    """An FskGraph with the `fsk_keep` skip (methods.skips.keep_skip.run_where_kept, the same rule): pass 1 over every
+    ROI pixel as before, then pass 2 (3FSK: coarse pass 2 and the fine pass) on the ROI's pixel lattice, the lattice
+    pixels within threshold + margin_db of the lattice maximum marked, and pass 2 again only on the other ROI pixels
+    within `radius_px` (in x and in y) of a marked one, compacted on the device; the filter's maximum is taken over
+    both. `run` also returns the pixels evaluated."""
+
+    def __init__(self, buffers, grid, pixels: np.ndarray, freqs_hz, pair, three, tx_m, rx_m, prior_m, keep_ratio,
+                 first_only, step_px: int, radius_px: int, margin_db: float, threshold_db: float):
+        from methods.skips.roi import lattice
+        dev = wp.get_device(buffers.wp_device)
+        on_lattice = lattice(pixels, step_px)
+        n_px = pixels.size
+        self.lattice_pixel = wp.array(np.flatnonzero(on_lattice).astype(np.int32), dtype=wp.int32, device=dev)
+        self.lattice_points = wp.zeros(self.lattice_pixel.shape[0], dtype=wp.vec3d, device=dev)
+        self.on_lattice = wp.array(on_lattice.ravel().astype(np.uint8), dtype=wp.uint8, device=dev)
+        self.roi = wp.array(pixels.ravel().astype(np.uint8), dtype=wp.uint8, device=dev)
+        self.marked = wp.empty(n_px, dtype=wp.uint8, device=dev)
+        self.rest_pixel = wp.zeros(int(pixels.sum()), dtype=wp.int32, device=dev)
+        self.rest_points = wp.zeros(int(pixels.sum()), dtype=wp.vec3d, device=dev)
+        self.rest_count = wp.empty(1, dtype=wp.int32, device=dev)
+        self.rest_count_host = wp.empty(1, dtype=wp.int32, device="cpu", pinned=not dev.is_cpu)
+        self.rest_count_view = self.rest_count_host.numpy()
+        self.every_point = wp.array([2**31 - 1], dtype=wp.int32, device=dev)
+        self.lattice_peak = wp.empty(1, dtype=wp.float32, device=dev)
+        self.radius_px = int(radius_px)
+        self.mark_ratio = float(10.0 ** (-(threshold_db + margin_db) / 20.0))
+        super().__init__(buffers, grid, np.flatnonzero(pixels), freqs_hz, pair, three, tx_m, rx_m, prior_m,
+                         keep_ratio, first_only)
+
+    def _pass2(self, pixel: wp.array, points: wp.array, count: wp.array) -> None:
+        """Pass 2 of the guess (3FSK: coarse step, fine pass, slope) at `points` of `pixel` (the first count[0]) into
+        the maps and the peak shards."""
+        dev, n = self.device, points.shape[0]
+        ph = self.pair_correlator.enqueue(points, count)
+        if self.three:
+            wp.launch(fsk_kernels.coarse_points_counted, dim=n,
+                      inputs=[ph, pixel, count, self.m_per_rad, points, self.maps], device=dev)
+            ph = self.all_correlator.enqueue(points, count)
+            wp.launch(fsk_kernels.slope_depth_counted, dim=n,
+                      inputs=[ph, pixel, count, self.centred, float(C_M_PER_S / (4.0 * np.pi)), points, self.maps,
+                              self.shards], device=dev)
+        else:
+            wp.launch(fsk_kernels.pair_depth_counted, dim=n,
+                      inputs=[ph, pixel, count, self.m_per_rad, self.first_only, points, self.maps, self.shards],
+                      device=dev)
+
+    def _enqueue(self) -> None:
+        dev, n, (ny, nx) = self.device, self.points.shape[0], self.shape
+        n_lattice = self.lattice_pixel.shape[0]
+        self._first_pass()
+        self.marked.zero_()
+        self.rest_count.zero_()
+        wp.launch(fsk_kernels.points_at_guess, dim=n_lattice,
+                  inputs=[self.lattice_pixel, nx, self.x_m, self.y_m, self.scalars, self.lattice_points], device=dev)
+        self._pass2(self.lattice_pixel, self.lattice_points, self.every_point)
+        reduce_peak(self.shards, self.lattice_peak, dev)                  # the shards hold the lattice's only
+        wp.launch(fsk_kernels.mark_lattice, dim=n_lattice,
+                  inputs=[self.lattice_pixel, self.maps, self.lattice_peak, self.mark_ratio, self.marked], device=dev)
+        wp.launch(fsk_kernels.compact_kept_rest, dim=ny * nx,
+                  inputs=[ny, nx, self.radius_px, self.roi, self.on_lattice, self.marked, self.x_m, self.y_m,
+                          self.scalars, self.rest_count, self.rest_pixel, self.rest_points], device=dev)
+        self._pass2(self.rest_pixel, self.rest_points, self.rest_count)
+        reduce_peak(self.shards, self.peak, dev)                          # lattice and the rest
+        wp.launch(fsk_kernels.magnitude_filter, dim=n_lattice,
+                  inputs=[self.lattice_pixel, self.keep_ratio, self.peak, self.maps], device=dev)
+        wp.launch(fsk_kernels.magnitude_filter_counted, dim=n,
+                  inputs=[self.rest_pixel, self.rest_count, self.keep_ratio, self.peak, self.maps], device=dev)
+        self.maps_back.enqueue()
+        wp.copy(self.scalars_host, self.scalars)
+        wp.copy(self.rest_count_host, self.rest_count)
+
+    def run(self, signal: np.ndarray):
+        """As `FskGraph.run`, plus the number of pixels evaluated (lattice and the rest)."""
+        maps, details = super().run(signal)
+        return maps, details, self.lattice_pixel.shape[0] + int(self.rest_count_view[0])
+
+
 def fsk_graph(buffers, grid, pixels: np.ndarray, freqs_hz, pair: list[int], three: bool, tx_m, rx_m, prior_m: float,
-              keep_ratio: float, first_only: bool = False) -> FskGraph:
-    """The FskGraph of this setting (pixels (ny, nx) bool, row-major order), built and captured on first use."""
+              keep_ratio: float, first_only: bool = False, keep: tuple | None = None) -> FskGraph:
+    """The FskGraph of this setting (pixels (ny, nx) bool, row-major order), built and captured on first use; with
+    `keep` = (step_px, radius_px, margin_db, threshold_db) the KeptFskGraph."""
     key = ("fsk", str(buffers.wp_device), grid, np.packbits(pixels).tobytes(), np.asarray(freqs_hz).tobytes(),
-           tuple(pair), three, tx_m.tobytes(), rx_m.tobytes(), float(prior_m), float(keep_ratio), bool(first_only))
+           tuple(pair), three, tx_m.tobytes(), rx_m.tobytes(), float(prior_m), float(keep_ratio), bool(first_only),
+           keep)
     if key not in _GRAPHS:
-        _GRAPHS[key] = FskGraph(buffers, grid, np.flatnonzero(pixels), np.asarray(freqs_hz, dtype=np.float64),
-                                list(pair), three, tx_m, rx_m, prior_m, keep_ratio, first_only)
+        freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
+        if keep is None:
+            _GRAPHS[key] = FskGraph(buffers, grid, np.flatnonzero(pixels), freqs_hz, list(pair), three, tx_m, rx_m,
+                                    prior_m, keep_ratio, first_only)
+        else:
+            _GRAPHS[key] = KeptFskGraph(buffers, grid, pixels, freqs_hz, list(pair), three, tx_m, rx_m, prior_m,
+                                        keep_ratio, first_only, *keep)
         while len(_GRAPHS) > GRAPHS_KEPT:
             _GRAPHS.pop(next(iter(_GRAPHS)))
     return _GRAPHS[key]

@@ -384,3 +384,87 @@ def magnitude_to_float32(maps: wp.array2d(dtype=wp.float64), magnitude: wp.array
     """magnitude = maps[1] in float32: exact, every magnitude is a float32 value (NaN stays NaN)."""
     p = wp.tid()
     magnitude[p] = wp.float32(maps[1, p])
+
+
+# 2FSK / 3FSK with `fsk_keep` (methods.skips.keep_skip) inside an FSK graph: pass 2 (3FSK: the coarse pass 2 and the
+# fine pass) first on a pixel lattice, the lattice pixels within threshold + margin of the lattice maximum marked,
+# then only the other ROI pixels within the square neighbourhood of a marked one (compacted into slots).
+
+@wp.kernel(enable_backward=False)
+def points_at_guess(pixel: wp.array(dtype=wp.int32), n_cols: int, x_m: wp.array(dtype=wp.float64),
+                    y_m: wp.array(dtype=wp.float64), scalars: wp.array(dtype=wp.float64),
+                    points: wp.array(dtype=wp.vec3d)):
+    """Point i = (x, y) of pixel[i] at the common guess scalars[0] (z1)."""
+    i = wp.tid()
+    p = pixel[i]
+    points[i] = wp.vec3d(x_m[p % n_cols], y_m[p // n_cols], scalars[0])
+
+
+@wp.kernel(enable_backward=False)
+def mark_lattice(pixel: wp.array(dtype=wp.int32), maps: wp.array2d(dtype=wp.float64),
+                 peak: wp.array(dtype=wp.float32), mark_ratio: wp.float64, marked: wp.array(dtype=wp.uint8)):
+    """`keep_skip.run_where_kept`: a lattice pixel is marked when its magnitude >= the lattice maximum times
+    10^(-(threshold + margin) / 20) (marked zeroed before)."""
+    p = pixel[wp.tid()]
+    if maps[1, p] >= wp.float64(peak[0]) * mark_ratio:
+        marked[p] = wp.uint8(1)
+
+
+@wp.kernel(enable_backward=False)
+def compact_kept_rest(n_rows: int, n_cols: int, radius: int, roi: wp.array(dtype=wp.uint8),
+                      on_lattice: wp.array(dtype=wp.uint8), marked: wp.array(dtype=wp.uint8),
+                      x_m: wp.array(dtype=wp.float64), y_m: wp.array(dtype=wp.float64),
+                      scalars: wp.array(dtype=wp.float64), count: wp.array(dtype=wp.int32),
+                      pixel: wp.array(dtype=wp.int32), points: wp.array(dtype=wp.vec3d)):
+    """`dilate(marked, radius) & pixels & ~lattice`: ROI pixels off the lattice with a marked pixel within `radius`
+    in x and in y go to the next slot (count zeroed before), their points at the common guess scalars[0]."""
+    p = wp.tid()
+    if roi[p] == wp.uint8(0) or on_lattice[p] != wp.uint8(0):
+        return
+    r = p // n_cols
+    c = p % n_cols
+    hit = int(0)  # noqa: UP018
+    for rr in range(wp.max(r - radius, 0), wp.min(r + radius, n_rows - 1) + 1):
+        for cc in range(wp.max(c - radius, 0), wp.min(c + radius, n_cols - 1) + 1):
+            if marked[rr * n_cols + cc] != wp.uint8(0):
+                hit = 1
+    if hit == 0:
+        return
+    i = wp.atomic_add(count, 0, 1)
+    pixel[i] = p
+    points[i] = wp.vec3d(x_m[c], y_m[r], scalars[0])
+
+
+@wp.kernel(enable_backward=False)
+def pair_depth_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
+                       count: wp.array(dtype=wp.int32), m_per_rad: wp.float64, first_only: int,
+                       points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
+                       peak: wp.array(dtype=wp.float32)):
+    """`pair_depth` over a launch of fixed size: threads from count[0] on do nothing."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    p = pixel[i]
+    c1 = ph[0, i]
+    c2 = ph[1, i]
+    maps[0, p] = points[i][2] - pair_correction_m(c1, c2, m_per_rad)
+    mag = wp.length((c1 + c2) * wp.float32(0.5))
+    if first_only != 0:
+        mag = wp.length(c1)
+    maps[1, p] = wp.float64(mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
+
+
+@wp.kernel(enable_backward=False)
+def coarse_points_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
+                          count: wp.array(dtype=wp.int32), m_per_rad: wp.float64, points: wp.array(dtype=wp.vec3d),
+                          maps: wp.array2d(dtype=wp.float64)):
+    """`coarse_points` over a launch of fixed size: threads from count[0] on do nothing."""
+    i = wp.tid()
+    if i >= count[0]:
+        return
+    q = points[i]
+    coarse = q[2] - pair_correction_m(ph[0, i], ph[1, i], m_per_rad)
+    points[i] = wp.vec3d(q[0], q[1], coarse)
+    maps[2, pixel[i]] = coarse
+
