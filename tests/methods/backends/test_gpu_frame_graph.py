@@ -177,12 +177,16 @@ def test_fsk_graph_with_the_keep_skip_equals_the_host_driven_skip(device, freq, 
     # an ulp of the phase (0.04 m/rad x 2.4e-7 rad = 1e-8 m), so pass 2 runs at points that differ by that much
     assert (ref, z1_m) == (want.extra["reference_pixel"], pytest.approx(want.extra["z1_m"], abs=1e-7))
     assert np.array_equal(np.isfinite(maps[1]), np.isfinite(want.magnitude))       # the same pixels evaluated
-    scale = np.nanmax(want.magnitude)
-    assert np.max(np.abs(maps[1] - want.magnitude), where=np.isfinite(want.magnitude), initial=0) < 1e-5 * scale
     valid, reference = np.isfinite(maps[0]), np.isfinite(want.depth_m)
     assert valid.sum() > 10 and np.mean(valid != reference) <= 0.002                 # pixels at the filter's edge
+    # 3FSK: a weak pixel's coarse angle is ill-conditioned (points 1e-8 m apart can move its coarse depth by cm,
+    # measured 2-4e-5 of the maximum in its fine magnitude on the H100), so 3FSK's values compare where both keep
+    # the depth; 2FSK's refocus is common to every pixel, so its magnitudes compare everywhere evaluated
+    strong = (valid & reference) if three else np.isfinite(want.magnitude)
+    scale = np.nanmax(want.magnitude)
+    assert np.max(np.abs(maps[1] - want.magnitude)[strong]) < 1e-5 * scale
     assert np.max(np.abs(maps[0] - want.depth_m)[valid & reference]) < 1e-6
-    if three:          # coarse depths where the depth is valid: a weak pixel's pair angle is ill-conditioned
+    if three:
         assert np.array_equal(np.isfinite(maps[2]), np.isfinite(want.extra["coarse_depth_m"]))
         assert np.max(np.abs(maps[2] - want.extra["coarse_depth_m"])[valid & reference]) < 1e-6
     if device == CUDA:
