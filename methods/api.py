@@ -194,7 +194,7 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     invalid_reason = None
     method.check(len(indices), freq, prior_value)
     backend = backend_for(device)
-    skips = resolve(roi, method.name, len(indices), backend.dense_beats_search)
+    skips = resolve(roi, method.name, len(indices), backend.dense_beats_search, backend.keeps_on_device)
     grid = grid or frame.grid
     if len(indices) == frame.signal.shape[2] and np.array_equal(indices, np.arange(len(indices))):
         signal = np.ascontiguousarray(frame.signal)      # every frequency (BP_max): the frame itself, not a copy
