@@ -23,7 +23,7 @@ import pandas as pd
 from scipy import stats
 
 from bench import cli
-from bench.report import agreement, tables, uncertainty
+from bench.report import agreement, scoring, tables, uncertainty
 
 METRICS = agreement.PAPER_METRICS
 SEEDS_COLUMN = "seed"
@@ -53,19 +53,28 @@ def groups(rows: pd.DataFrame) -> list[tuple[str, str, pd.DataFrame]]:
     return found
 
 
+def matrix_of(rows: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """`metric` per cell (index) and capture (columns) as bench.report.scoring counts it: P and P_e where the cell
+    reconstructed the capture, C_g and C_s wherever defined (no bootstrap: the report makes hundreds of these)."""
+    outcome = scoring.outcomes(rows)
+    cells = rows.drop_duplicates(scoring.GROUP_COLUMNS).set_index(scoring.GROUP_COLUMNS).cell
+    outcome["cell"] = [cells[key] for key in outcome[scoring.GROUP_COLUMNS].itertuples(index=False, name=None)]
+    return outcome.pivot(index="cell", columns="capture", values=metric)
+
+
 def compared(rows: pd.DataFrame, a: str, b: str, metric: str) -> dict | None:
-    """Cells `a` and `b` on `metric`, over the captures both count (bench.report.tables): means, captures, in how
-    many each is lower, the paired permutation test's p; None when either cell is missing."""
+    """Cells `a` and `b` on `metric`, over the captures both count (bench.report.scoring): means, captures, in how
+    many each is lower, the paired permutation test's p; None when either cell is missing or counts no capture."""
     part = rows[rows.cell.isin([a, b])]
     if set(part.cell) != {a, b}:
         return None
-    summary, pairs = agreement.scored(part)
-    found = tables.pair_of(pairs, metric, a, b)
-    if found is None:
+    matrix = matrix_of(part, metric)
+    result = uncertainty.paired(matrix.loc[a], matrix.loc[b])
+    if result.n == 0:
         return None
-    n, a_better, b_better, p = found
-    return {"a": summary.loc[a, metric], "b": summary.loc[b, metric], "n": n, "a_better": a_better,
-            "b_better": b_better, "p": p}
+    both = matrix.loc[a].notna() & matrix.loc[b].notna()
+    return {"a": matrix.loc[a, both].mean(), "b": matrix.loc[b, both].mean(), "n": result.n,
+            "a_better": result.a_better, "b_better": result.b_better, "p": result.p_value}
 
 
 def _text(result: dict, verdict: str, extra: str = "") -> str:
@@ -75,13 +84,14 @@ def _text(result: dict, verdict: str, extra: str = "") -> str:
 
 def relation_table(rows: pd.DataFrame) -> pd.DataFrame:
     """One line per (relation, profile): holds or reversed per seed and pooled, with both means (cm), in how many
-    captures the first cell is better, the paired p-value, and the paper's numbers."""
+    captures the first cell is better, the paired p-value, and the paper's numbers. The relations: BP_max against
+    MM-2FSK Δ10 on P and P_e, the other pairs the paper's text states (agreement.PAPER_PAIRS), the RealSense prior's
+    cost and the depth camera alone (the cells of two or three frequencies on every metric: few_frequency_summary)."""
     labels = agreement.labels_of(sorted(set(rows.cell)))
     specs = [(f"{labels[BP_MAX]} < {labels[MM10]} on {m.removesuffix('_cm')}", BP_MAX, MM10, m, "less")
              for m in ("P_cm", "P_e_cm")]
-    specs += [(f"{labels[MM10]} < {labels[c]} on {m.removesuffix('_cm')}"
-               + (" §" if agreement.geometry_fixed(c) else ""), MM10, c, m, "less")
-              for c in FEW_FREQUENCY for m in METRICS]
+    specs += [(f"{labels[a]} < {labels[b]} on {m.removesuffix('_cm')}" + (" §" if agreement.geometry_fixed(b) else ""),
+               a, b, m, "less") for a, b, m in agreement.PAPER_PAIRS if a != BP_MAX]
     specs += [(f"prior cost {labels[MM10]} on P >= {MIN_COST:g}x", MM10, TRUTH10, "P_cm", "cost")]
     specs += [(f"camera alone clearly worse than {labels[MM10]} on {m.removesuffix('_cm')}", MM10, CAMERA, m,
                "clearly") for m in ("P_cm", "C_s_cm")]
@@ -156,11 +166,11 @@ def own_means(rows: pd.DataFrame) -> pd.DataFrame:
             part = rows[(rows.cell == cell) & (agreement.profile_of(rows) == profile)]
             if not len(part):
                 continue
-            summary = agreement.means(part)
             for index, metric in enumerate(METRICS):
-                line[f"{metric.removesuffix('_cm')} {profile}"] = summary.loc[cell, metric]
+                line[f"{metric.removesuffix('_cm')} {profile}"] = matrix_of(part, metric).loc[cell].mean()
                 line[f"{metric.removesuffix('_cm')} paper"] = paper[index]
-            line[f"failed {profile}"] = f"{summary.loc[cell, 'failed']}/{summary.loc[cell, 'captures']}"
+            reconstructed = matrix_of(part, "P_cm").loc[cell].notna()
+            line[f"failed {profile}"] = f"{int((~reconstructed).sum())}/{reconstructed.size}"
         lines.append(line)
     return pd.DataFrame(lines)
 
@@ -233,6 +243,16 @@ def camera_against_range(rows: pd.DataFrame, errors: pd.DataFrame) -> tuple[pd.D
                          f"{rho.statistic:.2f} (p {uncertainty.p_text(rho.pvalue)}, {len(merged)} captures); cost "
                          f"median {merged['cost'][merged[beyond] < 0.1].median():.2f} where under 10 % of pixels "
                          f"lie beyond, {merged['cost'][merged[beyond] >= 0.5].median():.2f} where half or more do")
+        limit_mm = float(beyond.split()[2])
+        median = per_capture.set_index(["object", SEEDS_COLUMN])["median error mm"].abs()
+        for name, inside in (("within", median <= limit_mm), ("beyond", median > limit_mm)):
+            keys = inside[inside].index
+            kept = part[part.set_index(["object", SEEDS_COLUMN]).index.isin(keys)]
+            result = compared(pooled(kept), MM10, CAMERA, "P_cm")
+            if result is not None:
+                lines.append(f"{profile}: captures whose prior's median error lies {name} {limit_mm:g} mm: P "
+                             f"MM-2FSK Δ10 {result['a']:.2f} vs the camera alone {result['b']:.2f} cm, the radar "
+                             f"better in {result['a_better']} of {result['n']} (p {uncertainty.p_text(result['p'])})")
         summary = values.groupby("object")[[MM10, TRUTH10, CAMERA, "cost"]].mean()
         objects = objects.join(summary.add_suffix(f" {profile}"))
     return objects.reset_index(), lines
@@ -240,7 +260,8 @@ def camera_against_range(rows: pd.DataFrame, errors: pd.DataFrame) -> tuple[pd.D
 
 def ablation_table(ablation: pd.DataFrame, main: pd.DataFrame, kind: str) -> pd.DataFrame:
     """Per effect switched off (and the preset), per profile: the relations' numbers on seed 0's captures of the
-    ablation; camera effects borrow the ground-truth-prior cell from the preset (the camera does not change it)."""
+    ablation, each pair over the captures both cells count (their number in brackets); camera effects borrow the
+    ground-truth-prior cell from the preset (the camera does not change it)."""
     part = ablation[ablation.kind == kind]
     lines = []
     for (variant, profile), rows in part.groupby(["variant", agreement.profile_of(part)], sort=False):
@@ -258,8 +279,9 @@ def ablation_table(ablation: pd.DataFrame, main: pd.DataFrame, kind: str) -> pd.
                  ("P 3FSK / MM-2FSK Δ10", "3fsk_d05_d10", MM10, "P_cm")]
         for name, a, b, metric in pairs:
             result = compared(rows, a, b, metric)
-            if result is not None:
-                line[name] = f"{result['a']:.2f} / {result['b']:.2f} = x{result['a'] / result['b']:.2f}"
+            if result is not None and np.isfinite(result["a"]) and np.isfinite(result["b"]):
+                line[name] = (f"{result['a']:.2f} / {result['b']:.2f} = x{result['a'] / result['b']:.2f} "
+                              f"({result['n']})")
         lines.append(line)
     return pd.DataFrame(lines)
 

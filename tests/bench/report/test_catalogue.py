@@ -84,6 +84,9 @@ def test_the_prior_cost_follows_the_camera_error_beyond_the_unambiguous_range(ro
     assert lines[1].startswith("sound: per capture, the prior's cost against its share of pixels beyond: Spearman "
                                "1.00")
     assert table.set_index("object").loc["04_bottle", "cost sound"] == pytest.approx(10.0, rel=0.01)
+    # the bottle's two captures (one per seed) lie beyond: MM-2FSK Δ10 1.00 cm there against the camera's 3.00
+    assert ("sound: captures whose prior's median error lies beyond 7.5 mm: P MM-2FSK Δ10 1.00 vs the camera alone "
+            "3.00 cm, the radar better in 2 of 2 (p 0.5)") in lines
 
 
 def test_a_missing_folder_is_one_line(tmp_path):
