@@ -20,6 +20,10 @@ numbers).
 * `bp_range_cpu`: BP with many frequencies on the CPU gathers from range-compressed profiles
 (methods.backends.cpu_range)
   instead of summing every frequency.
+* `bp_dense_z_search`: BP on a backend that computes dense volumes (Warp) evaluates every pixel at every
+  `dense_z_step_m` of depth first, then a window of +-1 coarse step around each of its `dense_z_candidates`
+  largest coarse local maxima at the full depth step (methods.backends.warp.zsearch); the depth is the dense
+  volume's wherever its maximum lies in one of those windows.
 * `fsk_keep`: 2FSK's second pass and 3FSK's second and fine passes run only at pixels the filter can keep,
   predicted on a pixel lattice (methods.skips.keep_skip).
 `NONE` (`roi=none`) turns every skip off: the computation of today, bit for bit.
@@ -32,7 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-SKIP_NAMES = ("mask_bb", "mask_bb_depth", "coarse_roi", "bp_coarse_to_fine", "bp_range_cpu", "fsk_keep")
+SKIP_NAMES = ("mask_bb", "mask_bb_depth", "coarse_roi", "bp_coarse_to_fine", "bp_range_cpu", "fsk_keep",
+              "bp_dense_z_search")
 
 
 @dataclass(frozen=True)
@@ -45,6 +50,7 @@ class SkipSettings:
     bp_coarse_to_fine: bool = False
     bp_range_cpu: bool = False
     fsk_keep: bool = False
+    bp_dense_z_search: bool = False
     lattice_step_m: float = 0.003     # fsk_keep's lattice: a pixel every 3 mm in x and y (1/9 of 1 mm pixels)
     keep_margin_db: float = 10.0      # a lattice pixel marks its neighbourhood when within threshold + 10 dB of the max
     lattice_margin_m: float = 0.002   # the lattice neighbourhood: one lattice step + 2 mm in x and y
@@ -54,6 +60,8 @@ class SkipSettings:
     psf_max_loss_db: float = 3.0      # coarse depth step: largest with <= 3 dB point-target loss at half a step
     max_coarse_step_m: float = 0.01   # ... and at most 1 cm
     candidate_margin_db: float = 1.0  # refine coarse samples within (that loss + 1 dB) of the pixel's coarse max
+    dense_z_step_m: float = 0.003     # bp_dense_z_search's coarse depth step (window: +- one step at the grid's step)
+    dense_z_candidates: int = 2       # ... around the pixel's 2 largest coarse local maxima
 
     def lattice_px(self, pixel_pitch_m: float, step_m: float | None = None) -> tuple[int, int]:
         """(lattice step, neighbourhood half-width) in pixels of `pixel_pitch_m` for a lattice of `step_m` (default
