@@ -22,8 +22,9 @@ numbers).
   instead of summing every frequency.
 * `bp_dense_z_search`: BP on a backend that computes dense volumes (Warp) evaluates every pixel at every
   `dense_z_step_m` of depth first, then a window of +-1 coarse step around each of its `dense_z_candidates`
-  largest coarse local maxima at the full depth step (methods.backends.warp.zsearch); the depth is the dense
-  volume's wherever its maximum lies in one of those windows.
+  largest coarse local maxima at the full depth step (methods.backends.warp.zsearch), only at pixels whose
+  coarse maximum is within the filter's threshold + `dense_z_margin_db` of the image's (the others cannot pass
+  the filter); the depth is the dense volume's wherever its maximum lies in one of those windows.
 * `fsk_keep`: 2FSK's second pass and 3FSK's second and fine passes run only at pixels the filter can keep,
   predicted on a pixel lattice (methods.skips.keep_skip).
 `NONE` (`roi=none`) turns every skip off: the computation of today, bit for bit.
@@ -61,7 +62,8 @@ class SkipSettings:
     max_coarse_step_m: float = 0.01   # ... and at most 1 cm
     candidate_margin_db: float = 1.0  # refine coarse samples within (that loss + 1 dB) of the pixel's coarse max
     dense_z_step_m: float = 0.003     # bp_dense_z_search's coarse depth step (window: +- one step at the grid's step)
-    dense_z_candidates: int = 2       # ... around the pixel's 2 largest coarse local maxima
+    dense_z_candidates: int = 2       # ... around the pixel's 2 largest coarse local maxima, refined where its coarse
+    dense_z_margin_db: float = 6.0    # maximum is within threshold + 6 dB of the image's (else below the filter)
 
     def lattice_px(self, pixel_pitch_m: float, step_m: float | None = None) -> tuple[int, int]:
         """(lattice step, neighbourhood half-width) in pixels of `pixel_pitch_m` for a lattice of `step_m` (default

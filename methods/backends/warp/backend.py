@@ -132,10 +132,11 @@ class WarpBackend(Backend):
         return correlation.to_complex(run())[0].reshape(len(z_m), len(y_m), len(x_m))
 
     def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None,
-                    method: str = "auto", z_step: int = 1, z_candidates: int = 2):
+                    method: str = "auto", z_step: int = 1, z_candidates: int = 2, z_keep_ratio: float = 0.0):
         """As `Backend.volume_peak`; `method` as in `volume` ("columns": the accurate column-separable sum);
         `z_step` > 1: the coarse volume at every z_step-th depth and a window of +-z_step depths around each pixel's
-        `z_candidates` largest coarse local maxima (`zsearch`; the dense volume where z_m is shorter than
+        `z_candidates` largest coarse local maxima, only at pixels whose coarse maximum reaches `z_keep_ratio` times
+        the image's (`zsearch`; the dense volume where z_m is shorter than
         4 z_step or the kernel takes no points). `self.last_window_edges`: that search's pixels whose maximum lay
         on an inner window edge (None after a dense volume)."""
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
@@ -145,7 +146,7 @@ class WarpBackend(Backend):
         if z_step > 1 and len(z_m) >= 4 * z_step and kernel in ("tc", "separable", "direct"):
             depth_m, proj, self.last_window_edges = zsearch.volume_peak(
                 self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m, z_step, z_candidates,
-                kernel=kernel, timer=timer)
+                z_keep_ratio, kernel=kernel, timer=timer)
             return depth_m, proj
         return correlation.volume_peak(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m,
                                        kernel=kernel, timer=timer, term_tol=self.column_term_tol)

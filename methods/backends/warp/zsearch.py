@@ -36,14 +36,16 @@ def coarse_indices(n_z: int, step: int) -> np.ndarray:
 
 
 def volume_peak(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float,
-                step: int, n_cand: int = 2, *, kernel: str, timer=None) -> tuple[np.ndarray, np.ndarray, int]:
+                step: int, n_cand: int = 2, keep_ratio: float = 0.0, *, kernel: str, timer=None
+                ) -> tuple[np.ndarray, np.ndarray, int]:
     """As `correlation.volume_peak` (depth, max projection, each float64 (ny, nx)) through the coarse volume and
-    each pixel's window; also the number of pixels whose maximum lies on a window edge inside the grid (where the
-    dense volume may differ). `timer` gets the stages "correlate" and "depth"."""
+    each pixel's windows around its `n_cand` largest coarse peaks; pixels whose coarse maximum is below
+    `keep_ratio` times the image's coarse maximum get no windows (NaN depth, their coarse maximum as max
+    projection). Also the number of pixels whose maximum lies on a window edge inside the grid (where the dense
+    volume may differ). `timer` gets the stages "correlate" and "depth"."""
     stage = timer.stage if timer is not None else (lambda name: nullcontext())
     n_z, n_px = len(z_m), len(x_m) * len(y_m)
-    half = int(step)
-    n_w = 2 * half + 1                 # (the caller keeps n_z >= 4 step)
+    n_w = 2 * step + 1                 # (the caller keeps n_z >= 4 step)
     with stage("correlate"):
         inputs = frames.inputs(signal, freqs_hz, tx_m, rx_m)
         dev = wp.get_device(inputs.device)
@@ -53,19 +55,30 @@ def volume_peak(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
         grid = buffers.constant(("zsearch", x_m.tobytes(), y_m.tobytes(), z_m.tobytes(), step), lambda: (
             wp.array(k_c, dtype=wp.int32, device=dev),
             *(wp.array(np.asarray(v, dtype=np.float64), dtype=wp.float64, device=dev) for v in (x_m, y_m, z_m))))
+        counters = buffers.get("zs.counters", 3, wp.int32)     # slots, points, window edges
+        counters.zero_()
+        n_slots, n_points, on_edge = counters[0:1], counters[1:2], counters[2:3]
+        image_max = buffers.get("zs.image_max", 1, wp.float32)
+        image_max.zero_()
+        pixel_max = buffers.get("zs.pixel_max", n_px, wp.float32)
+        wp.launch(zsearch_kernels.coarse_max, dim=n_px, inputs=[coarse, len(k_c), pixel_max, image_max], device=dev)
+        slot_pixel = buffers.get("zs.slot_pixel", n_px, wp.int32)
         start = buffers.get("zs.start", n_px * n_cand, wp.int32)
         points = buffers.get("zs.points", n_px * n_cand * n_w, wp.vec3d)
-        wp.launch(zsearch_kernels.window_points, dim=n_px, inputs=[coarse, *grid, half, n_cand, start, points],
-                  device=dev)
+        maps = buffers.get("peak", (2, n_px), wp.float64)
+        wp.launch(zsearch_kernels.window_points, dim=n_px,
+                  inputs=[coarse, *grid, step, n_cand, pixel_max, image_max, float(keep_ratio), n_slots, n_points,
+                          slot_pixel, start, points, maps], device=dev)
+        if dev.is_cpu:                 # (the host knows the count at no cost: only those points)
+            points = points[:int(n_points.numpy()[0])]
         vals = correlation.make_launch(frames, _Named(buffers, "zs.window."), signal, freqs_hz, tx_m, rx_m,
-                                       kernel=kernel, points_m=points, sum_freqs=True, reuse=True, inputs=inputs)()
+                                       kernel=kernel, points_m=points, sum_freqs=True, reuse=True, inputs=inputs,
+                                       count=n_points)()
         wp.synchronize_device(dev)
     with stage("depth"):
-        maps = buffers.get("peak", (2, n_px), wp.float64)
-        on_edge = buffers.get("zs.on_edge", 1, wp.int32)
-        on_edge.zero_()
         wp.launch(zsearch_kernels.window_peak_depth, dim=n_px,
-                  inputs=[vals, n_w, n_cand, start, n_z, float(z_m[0]), float(dz_m), maps, on_edge], device=dev)
+                  inputs=[vals, n_w, n_cand, start, n_slots, slot_pixel, n_z, float(z_m[0]), float(dz_m), maps,
+                          on_edge], device=dev)
         host = maps.numpy().reshape(2, len(y_m), len(x_m))
         if dev.is_cpu:
             host = host.copy()

@@ -1,7 +1,8 @@
 """BP's depth search on a dense coarse volume (methods.backends.warp.zsearch, skip `bp_dense_z_search`): on fresh
 random scatterer surfaces its depths agree with the float64 direct sum's volume within 0.1 mm on >= 99.9 % of the
 pixels within -14 dB and its max projections with the float64 maxima within the kernel's precision; against the
-same backend's dense volume the depths and maxima are the same where the maximum lies inside the window."""
+same backend's dense volume the depths and maxima are the same where the maximum lies inside the window; pixels
+whose coarse maximum is below the keep ratio are left out (NaN) and no others."""
 from __future__ import annotations
 
 import numpy as np
@@ -24,7 +25,7 @@ MAG_TOL_CPU, MAG_TOL_CUDA = 1e-4, 4.9e-4
 def _surface_frame(rng, n=150):
     """A random curved surface of n unit scatterers with random phases near 0.3 m, and its two-frequency frame."""
     pts = np.column_stack([rng.uniform(-0.06, 0.06, n), rng.uniform(-0.06, 0.06, n), np.zeros(n)])
-    pts[:, 2] = rng.uniform(0.26, 0.34) + rng.uniform(-3, 3) * (pts[:, 0] ** 2 + pts[:, 1] ** 2) \
+    pts[:, 2] = rng.uniform(0.28, 0.32) + rng.uniform(-2, 2) * (pts[:, 0] ** 2 + pts[:, 1] ** 2) \
         + rng.uniform(-0.002, 0.002, n)
     k = 2 * np.pi * FREQS_HZ / C_M_PER_S
     d_rx = np.linalg.norm(pts[:, None] - ANT.rx_m[None], axis=2)
@@ -41,9 +42,9 @@ def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
     rng = np.random.default_rng()
     signal = _surface_frame(rng)
     x_m, y_m = np.linspace(-0.06, 0.06, 7), np.linspace(0.06, -0.06, 7)
-    z_m = np.linspace(0.2, 0.4, 101)
+    z_m = np.linspace(0.25, 0.35, 101)             # 1 mm, as the paper grid
     dz_m = z_m[1] - z_m[0]
-    step = int(rng.integers(3, 8))
+    step = int(rng.integers(2, 5))                 # coarse steps of 2-4 mm (the default: 3 mm)
     got_depth, got_proj = backend.volume_peak(signal.astype(np.complex64), FREQS_HZ, ANT.tx_m, ANT.rx_m, x_m, y_m,
                                               z_m, dz_m, z_step=step)
     edges = backend.last_window_edges
@@ -58,8 +59,16 @@ def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
     assert kept.sum() >= 10
     assert np.mean(np.abs(got_depth[kept] - ref_depth[kept]) <= 1e-4) >= 0.999
     mag_tol = MAG_TOL_CPU if device == "warp-cpu" else MAG_TOL_CUDA
-    assert np.max(np.abs(got_proj - ref_proj)) <= mag_tol * ref_proj.max()
+    assert np.max(np.abs(got_proj - ref_proj)[kept]) <= mag_tol * ref_proj.max()
+    assert np.all(got_proj <= ref_proj + mag_tol * ref_proj.max())   # elsewhere a window's maximum: a lower bound
     # the window holds the dense volume's own values: the same maxima and depths (float32 sums of one kernel)
     same = np.abs(got_depth - dense_depth) <= 1e-9
     assert np.sum(~same) <= edges
     assert np.allclose(got_proj[same], dense_proj[same], rtol=1e-6, atol=0)
+    # pixels whose coarse maximum is 20 dB below the image's are not refined: NaN there, the rest unchanged
+    cut_depth, cut_proj = backend.volume_peak(signal.astype(np.complex64), FREQS_HZ, ANT.tx_m, ANT.rx_m, x_m, y_m,
+                                              z_m, dz_m, z_step=step, z_keep_ratio=0.1)
+    skipped = np.isnan(cut_depth)
+    assert not np.any(skipped & kept)
+    assert np.array_equal(cut_depth[~skipped], got_depth[~skipped])
+    assert np.all(cut_proj[skipped] <= got_proj[skipped]) and np.all(cut_proj[skipped] < 0.1 * got_proj.max())
