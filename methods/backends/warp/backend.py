@@ -132,7 +132,7 @@ class WarpBackend(Backend):
         return correlation.to_complex(run())[0].reshape(len(z_m), len(y_m), len(x_m))
 
     def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None,
-                    method: str = "auto", z_step: int = 1, z_candidates: int = 2, z_keep_ratio: float = 0.0):
+                    method: str = "auto", z_step: int = 1, z_candidates: int = 3, z_keep_ratio: float = 0.0):
         """As `Backend.volume_peak`; `method` as in `volume` ("columns": the accurate column-separable sum);
         `z_step` > 1: the coarse volume at every z_step-th depth and a window of +-z_step depths around each pixel's
         `z_candidates` largest coarse local maxima, only at pixels whose coarse maximum reaches `z_keep_ratio` times

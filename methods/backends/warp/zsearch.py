@@ -36,7 +36,7 @@ def coarse_indices(n_z: int, step: int) -> np.ndarray:
 
 
 def volume_peak(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float,
-                step: int, n_cand: int = 2, keep_ratio: float = 0.0, *, kernel: str, timer=None
+                step: int, n_cand: int = 3, keep_ratio: float = 0.0, *, kernel: str, timer=None
                 ) -> tuple[np.ndarray, np.ndarray, int]:
     """As `correlation.volume_peak` (depth, max projection, each float64 (ny, nx)) through the coarse volume and
     each pixel's windows around its `n_cand` largest coarse peaks; pixels whose coarse maximum is below
