@@ -61,9 +61,10 @@ def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
     mag_tol = MAG_TOL_CPU if device == "warp-cpu" else MAG_TOL_CUDA
     assert np.max(np.abs(got_proj - ref_proj)[kept]) <= mag_tol * ref_proj.max()
     assert np.all(got_proj <= ref_proj + mag_tol * ref_proj.max())   # elsewhere a window's maximum: a lower bound
-    # the window holds the dense volume's own values: the same maxima and depths (float32 sums of one kernel)
+    # the windows hold the dense volume's own values: at the -14 dB pixels the same depths (but where the maximum lies
+    # on a window edge) and wherever the depth is the same, the same maximum (float32 sums of one kernel)
     same = np.abs(got_depth - dense_depth) <= 1e-9
-    assert np.sum(~same) <= edges
+    assert np.sum(~same & kept) <= edges
     assert np.allclose(got_proj[same], dense_proj[same], rtol=1e-6, atol=0)
     # pixels whose coarse maximum is 20 dB below the image's are not refined: NaN there, the rest unchanged
     cut_depth, cut_proj = backend.volume_peak(signal.astype(np.complex64), FREQS_HZ, ANT.tx_m, ANT.rx_m, x_m, y_m,
