@@ -61,10 +61,10 @@ class SkipSettings:
     psf_max_loss_db: float = 3.0      # coarse depth step: largest with <= 3 dB point-target loss at half a step
     max_coarse_step_m: float = 0.01   # ... and at most 1 cm
     candidate_margin_db: float = 1.0  # refine coarse samples within (that loss + 1 dB) of the pixel's coarse max
-    dense_z_step_m: float = 0.008     # bp_dense_z_search's coarse depth step (window: +- one step at the grid's step)
+    dense_z_step_m: float = 0.006     # bp_dense_z_search's coarse depth step (window: +- one step at the grid's step)
     dense_z_candidates: int = 3       # ... around the pixel's 3 largest coarse local maxima, refined where its coarse
-    dense_z_margin_db: float = 6.0    # maximum is within threshold + 6 dB of the image's (a point target loses <= 4.6
-    #                                   dB at half an 8 mm step 15 cm off axis at 20 cm: bp_search.point_target_loss_db)
+    dense_z_margin_db: float = 6.0    # maximum is within threshold + 6 dB of the image's (a point target loses <= 2.6
+    #                                   dB at half a 6 mm step 15 cm off axis at 20 cm: bp_search.point_target_loss_db)
 
     def lattice_px(self, pixel_pitch_m: float, step_m: float | None = None) -> tuple[int, int]:
         """(lattice step, neighbourhood half-width) in pixels of `pixel_pitch_m` for a lattice of `step_m` (default
@@ -108,9 +108,9 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False, kee
     CUDA) it pays and is on, as on the CPU (H100, catalogue at 30 cm: 2FSK d05 0.80-0.88 against 0.88-0.94 ms, 3FSK
     1.09-1.22 against 1.27-1.31 ms, 100 % of depths within 0.1 mm, 2 of 11 806 pixels lost once;
     docs/measurements/formation.md). There two-frequency BP searches its depths on a dense coarse volume
-    (`bp_dense_z_search`; H100, paper grid, masked objects, new frames: about 9 against 37 ms, >= 99.97 % of the
-    depths valid in both within 0.1 mm, the same valid pixels; catalogue captures on Warp-CPU: the same depths and
-    table metrics; docs/measurements/formation.md section 4)."""
+    (`bp_dense_z_search`; H100, paper grid, masked objects, new frames: 9.6 (p90 10.3) against 37 ms, >= 99.995 %
+    of the depths valid in both within 0.1 mm, the same valid pixels; an 8 mm step, 8.6 ms, moved 0.15 % of the
+    steps capture's depths on Warp-CPU; 6 mm kept them; docs/measurements/formation.md section 4)."""
     if method == "bp":
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True, bp_dense_z_search=n_freqs == 2)
