@@ -133,6 +133,21 @@ def test_range_cpu_matches_the_float64_direct_sum(record_property):
     assert np.abs(np.abs(got) - np.abs(ref)).max() / np.abs(ref).max() < RANGE_CPU_REL_TOL
 
 
+def test_range_cpu_depth_order_only_reorders_the_work(record_property, monkeypatch):
+    from methods.backends import cpu_range
+
+    rng = fresh_rng(record_property)
+    freqs_hz = MAROON_FREQS_HZ[:16]
+    signal = (rng.standard_normal((94, 94, 16)) + 1j * rng.standard_normal((94, 94, 16))).astype(np.complex64)
+    points_m = np.column_stack([rng.uniform(-0.1, 0.1, 300), rng.uniform(-0.1, 0.1, 300), rng.uniform(0.2, 0.4, 300)])
+    table = range_table(signal, freqs_hz, *path_bounds_m(ANTENNAS.tx_m, ANTENNAS.rx_m, points_m))
+    monkeypatch.setattr(cpu_range, "CHUNK_POINTS", 64)
+    ordered = cpu_range.correlate_range_cpu(table, ANTENNAS.tx_m, ANTENNAS.rx_m, points_m)
+    monkeypatch.setattr(cpu_range, "DEPTH_ORDER", False)
+    as_given = cpu_range.correlate_range_cpu(table, ANTENNAS.tx_m, ANTENNAS.rx_m, points_m)
+    np.testing.assert_allclose(ordered, as_given, rtol=0, atol=1e-6 * np.abs(as_given).max())
+
+
 def test_range_table_is_the_fft_range_profile(record_property):
     rng = fresh_rng(record_property)
     freqs_hz = MAROON_FREQS_HZ[:32]
