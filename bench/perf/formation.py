@@ -19,7 +19,7 @@ parts: columns,search on Warp devices, range,bp2 on the CPU):
   of each table's values against the float64 direct sum at 256 random voxels, and for the first frame the share of
   pixels within -14 dB whose depth is within 0.1 mm of the same search on the per-frequency BLAS sum;
 * `bp2` (CPU): BP d05 through `reconstruct_bp` with the CPU's default skips, wall and CPU time.
-Every row carries the 1-minute load average. Writes OUT/perf_formation_<device>.csv (OUT = `--out`, default
+The CPU parts' rows carry the 1-minute load average. Writes OUT/perf_formation_<device>.csv (OUT = `--out`, default
 outputs/perf/).
 """
 from __future__ import annotations
