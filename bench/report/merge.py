@@ -6,11 +6,20 @@ Sweep root after `python -m bench -m experiment=table3`: `results.csv` (every jo
 `depth_errors/<object>_<distance>_<frame>.png` (bench.report.plots; off by default: the figures cost more than the
 rest of the merge).
 `python -m bench.report.merge ROOT [--table NAME]` does the same for a sweep that was interrupted before the end.
+
+In a multirun the merge runs in a worker process (`python -m bench.report.merge --worker`) started when the multirun
+starts: it imports what the merge needs (pandas, SciPy's statistics, matplotlib: ~1 s on a quiet 2-core machine)
+while the jobs run, then waits for the sweep root on its stdin; the callback hands it over at the multirun's end and
+waits for it. Its errors are its own lines on stderr and its exit code is the sweep's (as in one process).
 """
 from __future__ import annotations
 
 import csv
 import io
+import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -93,12 +102,65 @@ def runtime_plot(root: Path, table: str, summary: pd.DataFrame) -> Path:
     return path
 
 
+def start_worker() -> subprocess.Popen:
+    """`python -m bench.report.merge --worker`, importing the merge's modules now; `finish_worker` gives it its work.
+    It imports this checkout's packages (the ones this process runs) and never counts stages (bench.harness.stages):
+    the waiting process counts the merge."""
+    from bench.harness.stages import ENV
+
+    package_root = str(Path(__file__).resolve().parents[2])
+    env = {key: value for key, value in os.environ.items() if key != ENV}
+    env["PYTHONPATH"] = os.pathsep.join([package_root, *filter(None, [os.environ.get("PYTHONPATH")])])
+    return subprocess.Popen([sys.executable, "-m", "bench.report.merge", "--worker"], stdin=subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, env=env)
+
+
+def finish_worker(worker: subprocess.Popen, root: Path, table: str | None, depth_errors: bool) -> None:
+    """Hand the sweep to the worker and wait: its exit code 2 (one `error:` line of its own on stderr) ends this
+    process with 2 too; any other failure is raised."""
+    try:
+        worker.stdin.write(json.dumps({"root": str(root), "table": table, "depth_errors": depth_errors}).encode())
+        worker.stdin.close()
+    except BrokenPipeError:               # it ended early (its error is on stderr); its exit code says
+        pass
+    code = worker.wait()
+    if code == cli.EXIT_USER_ERROR:
+        sys.exit(code)
+    if code != 0:
+        raise RuntimeError(f"the merge of {root} failed (exit code {code}; its error above)")
+
+
+def _worker() -> int:
+    """The worker's side: the merge's imports, then one sweep from stdin (none: the multirun ended without one)."""
+    from bench.report import plots  # noqa: F401 -- imported while the jobs run (module doc)
+
+    request = sys.stdin.read()
+    if not request.strip():
+        return 0
+    work = json.loads(request)
+    report(Path(work["root"]), work["table"], bool(work["depth_errors"]))
+    return 0
+
+
 class MergeResults(Callback):
-    """Hydra callback (configs/config.yaml `hydra.callbacks.merge`): `report` at the end of every multirun."""
+    """Hydra callback (configs/config.yaml `hydra.callbacks.merge`): `report` at the end of every multirun, in the
+    worker started at its start (module doc); in this process where none was started."""
+
+    def __init__(self):
+        self._worker: subprocess.Popen | None = None
+
+    def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
+        self._worker = start_worker()
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
+        root, table = Path(config.hydra.sweep.dir), config.report.table
+        depth_errors = config.report.get("depth_errors", False)
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            finish_worker(worker, root, table, depth_errors)
+            return
         try:
-            report(Path(config.hydra.sweep.dir), config.report.table, config.report.get("depth_errors", False))
+            report(root, table, depth_errors)
         except Exception as err:   # noqa: BLE001 -- a file or disk problem in one line (bench.cli); bugs re-raised
             message = cli.error_line(err)
             if message is None:
@@ -107,6 +169,8 @@ class MergeResults(Callback):
 
 
 def main() -> int:
+    if sys.argv[1:] == ["--worker"]:      # a multirun's merge (MergeResults), not a command for users
+        return _worker()
     parser = cli.ArgumentParser(prog="python -m bench.report.merge", description=__doc__)
     parser.add_argument("root", type=Path, help="sweep root (holding <job>/results.csv)")
     parser.add_argument("--table", choices=sorted(tables.TITLES))
