@@ -138,3 +138,38 @@ def test_a_kept_mesh_is_read_back_as_parsed(synth_root, tmp_path, monkeypatch):
     first, again = rows
     for column in ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm", "valid_px"):
         assert first[column] == again[column], column
+
+
+@pytest.mark.parametrize("experiment", ["table2", "table3", "beyond", "runtime"])
+def test_no_experiment_sets_hydra_mode_so_a_multirun_may_skip_hydras_mode_probe(experiment):
+    """bench.__main__.skip_mode_probe: with -m Hydra runs a multirun whatever the probe finds, unless a config said
+    RUN (then it only warns): skipping the probe's composition changes nothing while no config sets the mode."""
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose(config_name="config", overrides=[f"experiment={experiment}"], return_hydra_config=True)
+    assert cfg.hydra.mode is None
+
+
+def _job_rows(root, rows_text):
+    (root / "0_job").mkdir(parents=True)
+    (root / "0_job" / "results.csv").write_text(rows_text)
+
+
+def test_the_merge_worker_merges_what_it_is_handed_and_relays_a_user_error(tmp_path, capfd):
+    from bench.report import merge
+
+    header = ("object,distance,frame,method,freq,prior,f_GHz,C_g_cm,C_s_cm,P_cm,P_e_cm,valid_px,runtime_ms,device,"
+              "timing,label,grid,params,metrics,failure\n")
+    row = "01_plate,30,0,mm2fsk,d10,none,80.0 82.0,0.1,0.2,0.3,0.3,100,50.0,cpu,alone,MM-2FSK,from_capture,,sound,"
+    _job_rows(tmp_path / "sweep", f"{header}{row}\n")
+    merge.finish_worker(merge.start_worker(), tmp_path / "sweep", None, False)
+    merged = (tmp_path / "sweep" / "results.csv").read_text()
+    assert merged.splitlines()[0].startswith("object,distance,frame,method,freq,prior") and "01_plate" in merged
+    _job_rows(tmp_path / "cut", header + row[:20])                 # a row cut by a killed job
+    with pytest.raises(SystemExit) as exited:
+        merge.finish_worker(merge.start_worker(), tmp_path / "cut", None, False)
+    assert exited.value.code == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "cut mid-row" in err[0]
+    worker = merge.start_worker()              # a multirun that ends without a merge: the worker just exits
+    worker.stdin.close()
+    assert worker.wait() == 0 and not (tmp_path / "none").exists()
