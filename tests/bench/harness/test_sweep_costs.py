@@ -173,3 +173,23 @@ def test_the_merge_worker_merges_what_it_is_handed_and_relays_a_user_error(tmp_p
     worker = merge.start_worker()              # a multirun that ends without a merge: the worker just exits
     worker.stdin.close()
     assert worker.wait() == 0 and not (tmp_path / "none").exists()
+
+
+def test_the_merge_worker_starts_after_the_first_job_and_only_in_the_sweeps_process(monkeypatch):
+    from bench.report import merge
+
+    started = []
+    monkeypatch.setattr(merge, "start_worker", lambda: started.append(1) or "worker")
+    callback = merge.MergeResults()
+    callback.on_job_end(None, None)                      # no multirun started here (a joblib or SLURM job's copy)
+    assert started == []
+    callback.on_multirun_start(None)
+    assert started == []                                 # not while the jobs are composed
+    callback.on_job_end(None, None)
+    callback.on_job_end(None, None)
+    assert started == [1] and callback._worker == "worker"
+    remote = merge.MergeResults()
+    remote.on_multirun_start(None)
+    remote._sweep_pid += 1                                # the callback as copied into another process
+    remote.on_job_end(None, None)
+    assert started == [1]
