@@ -7,10 +7,11 @@ Sweep root after `python -m bench -m experiment=table3`: `results.csv` (every jo
 rest of the merge).
 `python -m bench.report.merge ROOT [--table NAME]` does the same for a sweep that was interrupted before the end.
 
-In a multirun the merge runs in a worker process (`python -m bench.report.merge --worker`) started when its first
-job ends: it imports what the merge needs (pandas, SciPy's statistics, matplotlib: ~1 s on a quiet 2-core machine)
-while the other jobs run, then waits for the sweep root on its stdin; the callback hands it over at the multirun's
-end and waits for it. Its errors are its own lines on stderr and its exit code is the sweep's (as in one process).
+In a multirun the merge runs in a worker process (`Worker`, forked from the sweep's process) started when its first
+job ends: it imports what the merge needs beyond what the jobs imported (SciPy's statistics, matplotlib: ~0.6 s on
+a quiet 2-core machine) while the other jobs run, then waits for the sweep root on a pipe; the callback hands it
+over at the multirun's end and waits for it. Its errors are its own lines on stderr and its exit code is the
+sweep's (as in one process).
 """
 from __future__ import annotations
 
@@ -18,8 +19,8 @@ import csv
 import io
 import json
 import os
-import subprocess
 import sys
+import traceback
 from pathlib import Path
 
 import pandas as pd
@@ -102,46 +103,77 @@ def runtime_plot(root: Path, table: str, summary: pd.DataFrame) -> Path:
     return path
 
 
-def start_worker() -> subprocess.Popen:
-    """`python -m bench.report.merge --worker`, importing the merge's modules now; `finish_worker` gives it its work.
-    It imports this checkout's packages (the ones this process runs) and never counts stages (bench.harness.stages):
-    the waiting process counts the merge."""
-    from bench.harness.stages import ENV
+class Worker:
+    """The merge's worker process (module doc): forked from this process, so it shares the modules this process has
+    imported (NumPy, pandas) and imports only the rest (SciPy's statistics, matplotlib); it reads one request from
+    a pipe and exits with 0 (done, or no request: the multirun ended without a merge), 2 after a user error (its
+    one `error:` line on stderr) or 1 after a bug (its traceback on stderr). It never runs this process's exit
+    handlers (e.g. the stage clock's, bench.harness.stages): the waiting process counts the merge."""
 
-    package_root = str(Path(__file__).resolve().parents[2])
-    env = {key: value for key, value in os.environ.items() if key != ENV}
-    env["PYTHONPATH"] = os.pathsep.join([package_root, *filter(None, [os.environ.get("PYTHONPATH")])])
-    return subprocess.Popen([sys.executable, "-m", "bench.report.merge", "--worker"], stdin=subprocess.PIPE,
-                            stdout=subprocess.DEVNULL, env=env)
+    def __init__(self):
+        read_fd, self._write_fd = os.pipe()
+        self.pid = os.fork()
+        if self.pid == 0:                    # the worker
+            os.close(self._write_fd)
+            code = 1
+            try:
+                code = _serve(read_fd)
+            except KeyboardInterrupt:
+                code = cli.EXIT_INTERRUPTED
+            except BaseException:            # noqa: BLE001 -- a bug: its traceback, exit 1
+                traceback.print_exc()
+            finally:
+                sys.stderr.flush()
+                os._exit(code)     # without tearing down pandas, SciPy and matplotlib (~0.2 s the sweep would wait)
+        os.close(read_fd)
+
+    def hand_over(self, request: dict | None) -> int:
+        """Send the request (None: nothing to merge) and wait for the worker's exit code."""
+        try:
+            if request is not None:
+                os.write(self._write_fd, json.dumps(request).encode())
+        except BrokenPipeError:              # it ended early (its error is on stderr); its exit code says
+            pass
+        finally:
+            os.close(self._write_fd)
+        return os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
 
 
-def finish_worker(worker: subprocess.Popen, root: Path, table: str | None, depth_errors: bool) -> None:
+def _serve(read_fd: int) -> int:
+    """The worker's side: the merge's imports, then the request from the pipe."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())    # its stdout is the sweep's: the merge itself prints nothing
+    from bench.report import plots  # noqa: F401 -- imported while the jobs run (module doc)
+
+    with os.fdopen(read_fd, "rb") as pipe:
+        request = pipe.read()
+    if not request.strip():
+        return 0
+    work = json.loads(request)
+    try:
+        report(Path(work["root"]), work["table"], bool(work["depth_errors"]))
+    except Exception as err:   # noqa: BLE001 -- a file or disk problem in one line (bench.cli); bugs re-raised
+        message = cli.error_line(err)
+        if message is None:
+            raise
+        print(f"error: {' '.join(message.split())}", file=sys.stderr)
+        return cli.EXIT_USER_ERROR
+    return 0
+
+
+def start_worker() -> Worker | None:
+    """The merge's worker, or None where processes cannot fork (the merge then runs in this process)."""
+    return Worker() if hasattr(os, "fork") else None
+
+
+def finish_worker(worker: Worker, root: Path, table: str | None, depth_errors: bool) -> None:
     """Hand the sweep to the worker and wait: its exit code 2 (one `error:` line of its own on stderr) ends this
     process with 2 too; any other failure is raised."""
-    try:
-        worker.stdin.write(json.dumps({"root": str(root), "table": table, "depth_errors": depth_errors}).encode())
-        worker.stdin.close()
-    except BrokenPipeError:               # it ended early (its error is on stderr); its exit code says
-        pass
-    code = worker.wait()
+    code = worker.hand_over({"root": str(root), "table": table, "depth_errors": depth_errors})
     if code == cli.EXIT_USER_ERROR:
         sys.exit(code)
     if code != 0:
         raise RuntimeError(f"the merge of {root} failed (exit code {code}; its error above)")
-
-
-def _worker() -> int:
-    """The worker's side: the merge's imports, then one sweep from stdin (none: the multirun ended without one)."""
-    from bench.report import plots  # noqa: F401 -- imported while the jobs run (module doc)
-
-    request = sys.stdin.read()
-    if not request.strip():
-        return 0
-    work = json.loads(request)
-    report(Path(work["root"]), work["table"], bool(work["depth_errors"]))
-    sys.stderr.flush()
-    os._exit(0)      # done: the files are written and closed; tearing down pandas, SciPy and matplotlib (~0.2 s) is
-                     # time the sweep would wait for
 
 
 class MergeResults(Callback):
@@ -151,7 +183,7 @@ class MergeResults(Callback):
     0.5 -> 1.9 s), and not where the jobs run in other processes (joblib, SLURM), which merge here, in this process."""
 
     def __init__(self):
-        self._worker: subprocess.Popen | None = None
+        self._worker: Worker | None = None
         self._sweep_pid: int | None = None
 
     def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
@@ -178,8 +210,6 @@ class MergeResults(Callback):
 
 
 def main() -> int:
-    if sys.argv[1:] == ["--worker"]:      # a multirun's merge (MergeResults), not a command for users
-        return _worker()
     parser = cli.ArgumentParser(prog="python -m bench.report.merge", description=__doc__)
     parser.add_argument("root", type=Path, help="sweep root (holding <job>/results.csv)")
     parser.add_argument("--table", choices=sorted(tables.TITLES))

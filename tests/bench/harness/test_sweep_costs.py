@@ -170,9 +170,7 @@ def test_the_merge_worker_merges_what_it_is_handed_and_relays_a_user_error(tmp_p
     assert exited.value.code == 2
     err = capfd.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and "cut mid-row" in err[0]
-    worker = merge.start_worker()              # a multirun that ends without a merge: the worker just exits
-    worker.stdin.close()
-    assert worker.wait() == 0 and not (tmp_path / "none").exists()
+    assert merge.start_worker().hand_over(None) == 0     # a multirun that ends without a merge: it just exits
 
 
 def test_the_merge_worker_starts_after_the_first_job_and_only_in_the_sweeps_process(monkeypatch):
