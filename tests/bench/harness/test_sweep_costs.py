@@ -191,3 +191,45 @@ def test_the_merge_worker_starts_after_the_first_job_and_only_in_the_sweeps_proc
     remote._sweep_pid += 1                                # the callback as copied into another process
     remote.on_job_end(None, None)
     assert started == [1]
+
+
+class _FailingLoader(_Loader):
+    def load_sweep_config(self, master_config, sweep_overrides):
+        if "freq=typo" in sweep_overrides:
+            raise ValueError("no freq 'typo'")
+        return super().load_sweep_config(master_config, sweep_overrides)
+
+
+def test_a_batch_is_composed_by_forked_workers_and_a_failure_is_composed_again_here(monkeypatch):
+    from hydra_plugins.mm2fsk_bench import sweeper
+
+    monkeypatch.setattr(sweeper, "_cores", lambda: 3)
+    loader = _Loader()
+    once = sweeper._ComposedOnce(loader)
+    batch = [["freq=d05"], ["freq=d1"], ["freq=d2"], ["freq=d4"]]
+    once.keep_all({}, batch)
+    assert loader.calls == []                                            # composed in the workers
+    assert [once.load_sweep_config({}, o)["composed"] for o in batch] == [tuple(o) for o in batch]
+    failing = _FailingLoader()
+    once = sweeper._ComposedOnce(failing)
+    with pytest.raises(ValueError, match="typo"):                        # here, as Hydra would report it
+        once.keep_all({}, [["freq=d05"], ["freq=typo"]])
+    assert failing.calls == [("freq=d05",)]
+
+
+def test_configurations_composed_by_the_workers_equal_those_composed_here():
+    from hydra._internal.hydra import Hydra
+    from hydra._internal.utils import create_config_search_path
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    from hydra_plugins.mm2fsk_bench import sweeper
+
+    loader = Hydra.create_main_hydra2(task_name="app", config_search_path=create_config_search_path(
+        str(CONFIG_DIR))).config_loader
+    master = loader.load_configuration("config", ["experiment=table3", "dataset=maroon", "dataset.root=/x"],
+                                       RunMode.MULTIRUN)
+    batch = [["cell=bp_d05"], ["cell=mm2fsk_d10"], ["cell=prior_only_d10"]]
+    forked = sweeper._compose_in_workers(loader, master, batch, 2)
+    here = [loader.load_sweep_config(master, o) for o in batch]
+    assert forked is not None and [OmegaConf.to_yaml(c) for c in forked] == [OmegaConf.to_yaml(c) for c in here]
