@@ -29,7 +29,6 @@ from omegaconf import DictConfig
 
 from bench import cli
 from bench.harness.results import write_results
-from bench.report import tables
 from methods.domain.errors import DatasetError
 
 
@@ -71,9 +70,9 @@ def merge(root: Path) -> pd.DataFrame:
 def report(root: Path, table: str | None, depth_errors: bool = False) -> pd.DataFrame:
     """Merge the rows; with a table name also write the table (md, csv with its pairs, tex) and the runtime plot,
     and with depth_errors the per-capture depth-error figures; returns the summary."""
-    from bench.report import (
-        plots,  # matplotlib (~1 s): only at the end of a sweep, not in every run that loads the callback
-    )
+    # here, not at the top: the sweep's own process loads the callback, and it needs neither matplotlib (~1 s) nor
+    # the tables' SciPy statistics (~0.3 s) when the worker merges
+    from bench.report import plots, tables
 
     rows = merge(root)
     summary = tables.summarise(rows)
@@ -142,7 +141,7 @@ class Worker:
 def _warm_up() -> None:
     """The merge's first-use costs, paid while the jobs run: its imports, pandas' LaTeX writer (jinja2 templates),
     matplotlib's Agg canvas, fonts and PNG writer (a throwaway plot): ~0.1 s less to wait for at the end."""
-    from bench.report import keyed, plots  # noqa: F401
+    from bench.report import keyed, plots, tables  # noqa: F401
 
     pd.DataFrame({"a": [1.0]}).style.to_latex()
     one_row = pd.DataFrame({"method": ["m"], "row": ["r"], "runtime_ms": [1.0], "P_cm": [1.0], "captures": [1],
@@ -220,6 +219,8 @@ class MergeResults(Callback):
 
 
 def main() -> int:
+    from bench.report import tables
+
     parser = cli.ArgumentParser(prog="python -m bench.report.merge", description=__doc__)
     parser.add_argument("root", type=Path, help="sweep root (holding <job>/results.csv)")
     parser.add_argument("--table", choices=sorted(tables.TITLES))
