@@ -15,9 +15,10 @@ strongest pixel is taken among them), and with `fsk_keep` pass 2 runs only where
 (methods.skips.keep_skip); depths outside the ROI's depth interval are invalid. With neither (`roi=none`) the
 computation is today's.
 
-Without `fsk_keep`, a backend that holds the frame on a device (`Backend.device_fsk`: Warp) runs both passes,
-the strongest-pixel reduction, the depth and the filter there and copies the maps back once
-(methods.backends.warp.fsk.two_pass, the same expressions).
+A backend that holds the frame on a device (`Backend.device_fsk`: Warp) runs both passes, the strongest-pixel
+reduction, the depth and the filter there and copies the maps back once (methods.backends.warp.fsk.two_pass, the same
+expressions); with `fsk_keep` it does so where it can keep on its device (`Backend.keeps_on_device`: Warp on CUDA,
+the same rule in the FSK graph, methods.backends.warp.frame_graph.KeptFskGraph), else the host drives the passes.
 """
 from __future__ import annotations
 
@@ -125,6 +126,15 @@ def finish(depth_m: np.ndarray, magnitude: np.ndarray, grid: RadarGrid, freqs_hz
                           timings_ms=timer.finish(), grid=grid, method=method, extra=extra)
 
 
+def keep_rule(skips: SkipSettings, grid: RadarGrid, threshold_db: float | None) -> tuple | None:
+    """(lattice step px, neighbourhood radius px, margin dB, threshold dB) of the `fsk_keep` skip where it applies
+    (`keep_skip.run_where_kept`: on, a threshold set, a lattice step > 1 pixel), else None (every pixel)."""
+    if not skips.fsk_keep or threshold_db is None:
+        return None
+    step_px, radius_px = skips.lattice_px(pixel_pitch_m(grid))
+    return None if step_px <= 1 else (step_px, radius_px, float(skips.keep_margin_db), float(threshold_db))
+
+
 def device_result(depth_m: np.ndarray, magnitude: np.ndarray, grid: RadarGrid, freqs_hz: np.ndarray, method: str,
                   timer: StageTimer, extra: dict, roi: Roi) -> Reconstruction:
     """The Reconstruction of maps the device already filtered: depths outside the ROI's depth interval dropped."""
@@ -148,10 +158,13 @@ def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
         nan = np.full(grid.image_shape, np.nan)
         return finish(nan, nan.copy(), grid, freqs_hz, "2fsk", threshold_db, timer,
                       {"prior_m": prior_m, "roi_px": 0, "roi_sources": roi.sources}, roi)
-    if backend.device_fsk and not skips.fsk_keep:
+    keep = keep_rule(skips, grid, threshold_db)
+    if backend.device_fsk and (keep is None or backend.keeps_on_device):
         depth_m, magnitude, details = backend.fsk_two_pass(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid,
-                                                           pixels, prior_m, threshold_db, filter_quantity, timer)
-        extra = {"prior_m": prior_m, **details, "roi_px": int(pixels.sum()), "roi_sources": roi.sources}
+                                                           pixels, prior_m, threshold_db, filter_quantity, timer,
+                                                           keep=keep)
+        evaluated = details.pop("evaluated_px", int(pixels.sum()))
+        extra = {"prior_m": prior_m, **details, "roi_px": evaluated, "roi_sources": roi.sources}
         return device_result(depth_m, magnitude, grid, freqs_hz, "2fsk", timer, extra, roi)
     x_img, y_img = grid.pixel_xy_m()
     z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_img[pixels], y_img[pixels], prior_m, backend,

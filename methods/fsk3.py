@@ -24,8 +24,9 @@ and the three frequencies of the fine pass.
 Region of interest and skips: the passes run only on the ROI's pixels; with `fsk_keep` the coarse step's pass 2
 and the fine pass run only where the filter (on the fine pass's magnitude) can keep a pixel (methods.skips.keep_skip);
 depths outside the ROI's depth interval are invalid. With neither (`roi=none`) the computation is today's.
-Without `fsk_keep`, a `device_fsk` backend (Warp) runs every pass, the depth and the filter on its device and copies
-the maps back once (methods.backends.warp.fsk.three_fsk, the same expressions).
+A `device_fsk` backend (Warp) runs every pass, the depth and the filter on its device and copies the maps back once
+(methods.backends.warp.fsk.three_fsk, the same expressions); with `fsk_keep` only where it keeps on its device
+(`Backend.keeps_on_device`), else the host drives the passes.
 """
 from __future__ import annotations
 
@@ -41,6 +42,7 @@ from methods.fsk import (
     device_result,
     finish,
     first_pass_z1_m,
+    keep_rule,
     mean_phasor_magnitude,
     second_pass,
 )
@@ -86,10 +88,13 @@ def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
         nan = np.full(grid.image_shape, np.nan)
         return finish(nan, nan.copy(), grid, freqs_hz, "3fsk", threshold_db, timer,
                       {**extra, "coarse_depth_m": nan.copy(), "roi_px": 0, "roi_sources": roi.sources}, roi)
-    if backend.device_fsk and not skips.fsk_keep:
+    keep = keep_rule(skips, grid, threshold_db)
+    if backend.device_fsk and (keep is None or backend.keeps_on_device):
         depth_m, magnitude, coarse_m, details = backend.fsk_three(signal, freqs_hz, antennas.tx_m, antennas.rx_m,
-                                                                  grid, pixels, coarse, prior_m, threshold_db, timer)
-        extra.update(coarse_depth_m=coarse_m, **details, roi_px=int(pixels.sum()), roi_sources=roi.sources)
+                                                                  grid, pixels, coarse, prior_m, threshold_db, timer,
+                                                                  keep=keep)
+        evaluated = details.pop("evaluated_px", int(pixels.sum()))
+        extra.update(coarse_depth_m=coarse_m, **details, roi_px=evaluated, roi_sources=roi.sources)
         return device_result(depth_m, magnitude, grid, freqs_hz, "3fsk", timer, extra, roi)
     x_img, y_img = grid.pixel_xy_m()
     coarse_signal, coarse_hz = signal[:, :, coarse], freqs_hz[coarse]

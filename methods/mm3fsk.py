@@ -20,6 +20,11 @@ size is common); MM-3FSK keeps d10's precision up to the coarse pair's range. Co
 vary across the object by more than 0.75 cm (the offset is one number). The filter quantity is the magnitude of the mean
 residual phasor over the pairs and the three frequencies of the fine pass, thresholded relative to the maximum.
 Only pixels with a prior (inside the ROI) are correlated; depths outside the ROI's depth interval are invalid.
+
+Where the backend holds a RealSense prior not built yet (Warp on CUDA, fill 'scanline'), the prior, both
+correlations, the median offset, the depth and the filter run as one device graph with one copy back
+(`Backend.mm3fsk_at_prior`, methods.backends.warp.frame_graph; the offset within 3e-11 m of np.median's); any
+other prior runs the passes from the host.
 """
 from __future__ import annotations
 
@@ -68,13 +73,38 @@ class MM3FSK(Method):
     label = "MM-3FSK"
     n_freqs = 3
     priors = ("realsense", "photogrammetry")
+    device_prior = True
 
     def run(self, frame: Frame, prior: Prior, backend: Backend, timer: StageTimer) -> Reconstruction:
         freqs_hz = np.asarray(frame.freqs_hz, dtype=np.float64)
         if not np.all(np.diff(freqs_hz) > 0):
             raise ValueError(f"MM-3FSK needs three ascending frequencies, got {freqs_hz}")
         grid, roi = frame.grid, frame.roi
-        prior_image_m = prior.host_m()
+        on_device = None
+        if prior.device_resident:                  # a RealSense prior not built yet: one frame graph (Warp)
+            on_device = backend.mm3fsk_at_prior(frame.signal, freqs_hz, frame.antennas.tx_m, frame.antennas.rx_m,
+                                                grid, prior, coarse_pair(freqs_hz), frame.threshold_db, timer,
+                                                None if roi.pixels.all() else roi.pixels)
+        if on_device is not None:
+            (depth_m, magnitude, prior_image_m), offset_m = on_device
+            n = prior.n_used
+            offset_m = offset_m if n else float("nan")         # as the host path: no pixel, no offset
+            with timer.stage("filter"):
+                depth_m = roi_depth_m(depth_m, roi)            # the device filtered by magnitude already
+        else:
+            prior_image_m = prior.host_m()
+            depth_m, magnitude, offset_m, n = self._host(frame, freqs_hz, prior_image_m, backend, timer)
+        return Reconstruction(depth_m=depth_m, magnitude=magnitude, freqs_hz=freqs_hz, timings_ms=timer.finish(),
+                              grid=grid, method=self.name,
+                              extra={"prior_depth_m": prior_image_m, "prior_pixels": n, "roi_px": n,
+                                     "prior_offset_m": offset_m, "roi_sources": roi.sources + ("prior",)})
+
+    @staticmethod
+    def _host(frame: Frame, freqs_hz: np.ndarray, prior_image_m: np.ndarray, backend: Backend, timer: StageTimer
+              ) -> tuple[np.ndarray, np.ndarray, float, int]:
+        """Depth and magnitude (ny, nx), the prior offset (m) and the pixels correlated, the passes driven from
+        the host (`mm3fsk_depth_m`)."""
+        grid, roi = frame.grid, frame.roi
         has_prior = np.isfinite(prior_image_m) & roi.pixels
         x_img, y_img = grid.pixel_xy_m()
         depth_m, magnitude = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
@@ -88,8 +118,4 @@ class MM3FSK(Method):
                 magnitude[has_prior] = mean_phasor_magnitude(fine)
         with timer.stage("filter"):
             depth_m = roi_depth_m(filter_depth(depth_m, magnitude, frame.threshold_db), roi)
-        n = int(has_prior.sum())
-        return Reconstruction(depth_m=depth_m, magnitude=magnitude, freqs_hz=freqs_hz, timings_ms=timer.finish(),
-                              grid=grid, method=self.name,
-                              extra={"prior_depth_m": prior_image_m, "prior_pixels": n, "roi_px": n,
-                                     "prior_offset_m": offset_m, "roi_sources": roi.sources + ("prior",)})
+        return depth_m, magnitude, offset_m, int(has_prior.sum())

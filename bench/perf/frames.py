@@ -42,8 +42,8 @@ from methods.method import SENSOR_PRIORS
 from methods.ops.correlate import C_M_PER_S
 from methods.prior.priors import DEFAULT_FILL, FILLS
 
-CASES = (("mm2fsk", "d10", "realsense"), ("2fsk", "d05", "none"), ("3fsk", "d05_d10", "none"),
-         ("bp", "d05", "none"), ("bp", "full", "none"))
+CASES = (("mm2fsk", "d10", "realsense"), ("mm3fsk", "d05_d10", "realsense"), ("2fsk", "d05", "none"),
+         ("3fsk", "d05_d10", "none"), ("bp", "d05", "none"), ("bp", "full", "none"))
 GRID = RadarGrid((-0.15, -0.15, 0.22), (0.15, 0.15, 0.42), (301, 301, 201))
 REALSENSE2RADAR = np.diag([1e-3, -1e-3, 1e-3, 1.0])     # camera at the radar origin, y down, millimetres
 SCATTERER_PITCH_M = 0.005

@@ -56,6 +56,8 @@ class Backend:
     dense_beats_search = False
     #: 2FSK and 3FSK run their passes where the data lives (`fsk_two_pass`, `fsk_three`): one copy back
     device_fsk = False
+    #: with `device_fsk`: the `fsk_keep` skip also runs on the device (`keep` of fsk_two_pass / fsk_three)
+    keeps_on_device = False
 
     def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m) -> np.ndarray:
         """complex64 (F, N) phasors at points_m (N, 3), radar space, metres."""
@@ -103,13 +105,14 @@ class Backend:
         return HostPrior(mesh_prior_m(mesh, photogrammetry2radar, grid, fill=fill), grid)
 
     def fsk_two_pass(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, pixels: np.ndarray, prior_m: float,
-                     threshold_db: float | None, filter_quantity: str, timer):
+                     threshold_db: float | None, filter_quantity: str, timer, keep: tuple | None = None):
         """2FSK over the True `pixels` (ny, nx) where the data lives: (depth_m, magnitude) (ny, nx) filtered, and
-        the details (reference_pixel, z1_m) (`device_fsk` backends)."""
+        the details (reference_pixel, z1_m; with `keep`, `fsk.keep_rule`'s tuple on a `keeps_on_device` backend, also
+        evaluated_px) (`device_fsk` backends)."""
         raise NotImplementedError(f"{type(self).__name__} runs 2FSK on the host")
 
     def fsk_three(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, pixels: np.ndarray, coarse: list[int],
-                  prior_m: float, threshold_db: float | None, timer):
+                  prior_m: float, threshold_db: float | None, timer, keep: tuple | None = None):
         """3FSK over the True `pixels` where the data lives, `coarse` the indices of the coarse pair: (depth_m,
         magnitude, coarse_depth_m) (ny, nx) and the details (`device_fsk` backends)."""
         raise NotImplementedError(f"{type(self).__name__} runs 3FSK on the host")
@@ -120,6 +123,13 @@ class Backend:
         """Two-frequency depth at a device-resident prior, where it lives: (depth_m, magnitude, prior_m) (ny, nx);
         `roi_pixels` (ny, nx) bool restricts the correlated pixels where `prior.takes_roi`."""
         raise NotImplementedError(f"{type(self).__name__} holds no device-resident priors")
+
+    def mm3fsk_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid: RadarGrid, prior: Prior, coarse: list[int],
+                        threshold_db: float | None, timer, roi_pixels: np.ndarray | None = None):
+        """MM-3FSK (`methods.mm3fsk`, `coarse` the coarse pair's indices) at a device-resident prior where it lives:
+        ((depth_m, magnitude, prior_m) (ny, nx), prior offset m), the correlated pixels restricted to `roi_pixels`
+        (ny, nx) bool; or None where this backend leaves it to the host."""
+        return None
 
     def warm_up(self, signal, freqs_hz, tx_m, rx_m, *, volume: bool, prior: bool) -> None:
         """Compile what a timed run will need (nothing to compile on the numpy backend)."""

@@ -78,7 +78,8 @@ ALL = SkipSettings(**dict.fromkeys(SKIP_NAMES, True))
 PRESETS = ("none", "auto", "all")
 
 
-def default_for(method: str, n_freqs: int, dense_beats_search: bool = False) -> SkipSettings:
+def default_for(method: str, n_freqs: int, dense_beats_search: bool = False, keeps_on_device: bool = False
+                ) -> SkipSettings:
     """The skips on by default (`roi=auto`) for a method, frequency count and backend: those measured to agree with
     the full computation on every catalogue object and to save time there (docs/measurements/skips.md,
     docs/measurements/gpu.md).
@@ -92,19 +93,23 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False) -> 
     d05 18.5 ms with `fsk_keep` against 9.9 ms; 3FSK 21.8 against 16.5 ms; two-frequency BP with the coarse ROI
     evaluated as the dense volume over its bounding box, bp._box_depth_m, 54.8 against 40.5 ms), so there only
     `mask_bb` stays on for them; BP with many frequencies keeps the coarse ROI and the search (145 against 519 ms,
-    docs/measurements/gpu.md)."""
+    docs/measurements/gpu.md). Where the backend runs `fsk_keep` inside its device graph (`keeps_on_device`: Warp on
+    CUDA) it pays and is on, as on the CPU (H100, catalogue at 30 cm: 2FSK d05 0.80-0.88 against 0.88-0.94 ms, 3FSK
+    1.09-1.22 against 1.27-1.31 ms, 100 % of depths within 0.1 mm, 2 of 11 806 pixels lost once;
+    docs/measurements/formation.md)."""
     if method == "bp":
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True)
         return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True)
     if dense_beats_search:
-        return SkipSettings(mask_bb=True)
+        return SkipSettings(mask_bb=True, fsk_keep=keeps_on_device)
     return SkipSettings(mask_bb=True, fsk_keep=True)
 
 
 def resolve(roi: str | Mapping | SkipSettings | None, method: str = "bp", n_freqs: int = 2,
-            dense_beats_search: bool = False) -> SkipSettings:
-    """SkipSettings from a preset name ('none', 'auto' = `default_for(method, n_freqs, dense_beats_search)`, 'all'), a
+            dense_beats_search: bool = False, keeps_on_device: bool = False) -> SkipSettings:
+    """SkipSettings from a preset name ('none', 'auto' = `default_for(method, n_freqs, dense_beats_search,
+    keeps_on_device)`, 'all'), a
     mapping of
     fields (a Hydra `roi` config; its `name` key is ignored, an optional `preset` key gives the base, default
     'none'), an instance, or None (= 'auto')."""
@@ -115,10 +120,12 @@ def resolve(roi: str | Mapping | SkipSettings | None, method: str = "bp", n_freq
     if isinstance(roi, str):
         if roi not in PRESETS:
             raise ValueError(f"roi must be one of {', '.join(PRESETS)} or a mapping of skip settings, got {roi!r}")
-        return {"none": NONE, "all": ALL}.get(roi) or default_for(method, n_freqs, dense_beats_search)
+        return {"none": NONE, "all": ALL}.get(roi) or default_for(method, n_freqs, dense_beats_search,
+                                                                  keeps_on_device)
     fields = {k: v for k, v in dict(roi).items() if k not in ("name", "preset")}
     known = {f.name for f in dataclasses.fields(SkipSettings)}
     unknown = set(fields) - known
     if unknown:
         raise ValueError(f"unknown roi setting(s) {', '.join(sorted(unknown))}; allowed: {', '.join(sorted(known))}")
-    return dataclasses.replace(resolve(dict(roi).get("preset", "none"), method, n_freqs, dense_beats_search), **fields)
+    return dataclasses.replace(resolve(dict(roi).get("preset", "none"), method, n_freqs, dense_beats_search,
+                                       keeps_on_device), **fields)

@@ -125,6 +125,8 @@ DOC_RUNS: dict[str, list[str]] = {
          "test -s {tmp}/agreement/agreement.md"],
     r"python -m bench.report.agreement [--preset realistic\|ideal] [--objects ...] [--cells ...] [--ablation] [--out DIR]":
         ["{py} -m bench.report.agreement --help"],
+    # the relations report reads 3,240 rows and pairs every relation per seed (~2 min): its options are checked only
+    "python -m bench.report.catalogue results/catalogue": ["{py} -m bench.report.catalogue --help"],
     ".venv/bin/python -m bench.maroon.inspect_capture /data/maroon": ["{py} -m bench.maroon.inspect_capture {synth}"],
     "python -m bench.maroon.inspect_capture DIR": ["{py} -m bench.maroon.inspect_capture {synth}"],
     "python -m bench.maroon.inspect_capture": ["{py} -m bench.maroon.inspect_capture --help"],        # named in prose

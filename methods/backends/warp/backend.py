@@ -36,6 +36,7 @@ class WarpBackend(Backend):
         # tensor cores on CUDA; Warp-CPU runs tiles with block_dim 1, where the fp32 separable kernel is faster
         self.default_kernel = "separable" if self.device.is_cpu else "tc"
         self.rasterises_prior = not self.device.is_cpu
+        self.keeps_on_device = not self.device.is_cpu      # the fsk_keep skip inside the FSK graph (CUDA only)
         self.warmed: set = set()
         #: BP's coarse-to-fine search with many frequencies runs on the device (`search`); False: host-driven.
         #: On by default where it pays: CUDA (H100 BP_max frame 190 vs 380 ms); on Warp-CPU the frame's range
@@ -176,6 +177,20 @@ class WarpBackend(Backend):
             return self.make_launch(signal, freqs_hz, tx_m, rx_m, points_m=points, reuse=True)()
         return fsk.depth_at_prior(self.buffers, correlate_points, signal, freqs_hz, grid, prior, keep_ratio, timer)
 
+    def mm3fsk_at_prior(self, signal, freqs_hz, tx_m, rx_m, grid, prior, coarse, threshold_db, timer,
+                        roi_pixels=None):
+        """MM-3FSK's frame graph (prior, both correlations, median offset, depth, filter: one launch) for a RealSense
+        prior not built yet; None (the host path) for any other prior."""
+        if not (isinstance(prior, DeferredPrior) and prior.pending):
+            return None
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        with timer.stage("correlate"):
+            graph = frame_graph(self.buffers, prior.depth, prior.realsense2radar, grid, prior.max_jump_mm, freqs_hz,
+                                tx_m, rx_m, self._keep_ratio(threshold_db), coarse)
+            depth_m, magnitude, prior_m, n_covered, n_used = graph.run(prior.depth, signal, roi_pixels)
+        prior.resolve(prior_m, n_covered, n_used)
+        return (depth_m, magnitude, prior_m), graph.offset_m
+
     def _point_correlator(self, signal, freqs_hz, tx_m, rx_m):
         """Function device points (n,) vec3d -> device phasors (F, n) of this frame (inputs looked up once)."""
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
@@ -191,26 +206,32 @@ class WarpBackend(Backend):
         return 0.0 if threshold_db is None else float(10.0 ** (-threshold_db / 20.0))
 
     def fsk_two_pass(self, signal, freqs_hz, tx_m, rx_m, grid, pixels, prior_m, threshold_db, filter_quantity,
-                     timer):
+                     timer, keep=None):
         freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
         if not self.device.is_cpu:                    # one CUDA graph per setting: stage 'correlate' holds it all
             signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
             with timer.stage("correlate"):
-                maps, (z1_m, ref) = fsk_graph(self.buffers, grid, pixels, freqs_hz, [0, 1], False, tx_m, rx_m,
-                                              prior_m, self._keep_ratio(threshold_db),
-                                              filter_quantity == "first").run(signal)
-            return maps[0], maps[1], {"reference_pixel": ref, "z1_m": z1_m}
+                maps, (z1_m, ref), *evaluated = fsk_graph(
+                    self.buffers, grid, pixels, freqs_hz, [0, 1], False, tx_m, rx_m, prior_m,
+                    self._keep_ratio(threshold_db), filter_quantity == "first", keep).run(signal)
+            return maps[0], maps[1], {"reference_pixel": ref, "z1_m": z1_m, **_evaluated(evaluated)}
+        if keep is not None:
+            raise ValueError("the fsk_keep skip runs on the device only on CUDA (keeps_on_device)")
         return fsk.two_pass(self.buffers, self._point_correlator(signal, freqs_hz, tx_m, rx_m), grid, pixels,
                             freqs_hz, prior_m, self._keep_ratio(threshold_db), filter_quantity == "first", timer)
 
-    def fsk_three(self, signal, freqs_hz, tx_m, rx_m, grid, pixels, coarse, prior_m, threshold_db, timer):
+    def fsk_three(self, signal, freqs_hz, tx_m, rx_m, grid, pixels, coarse, prior_m, threshold_db, timer,
+                  keep=None):
         freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
         if not self.device.is_cpu:
             signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
             with timer.stage("correlate"):
-                maps, (z1_m, ref) = fsk_graph(self.buffers, grid, pixels, freqs_hz, list(coarse), True, tx_m, rx_m,
-                                              prior_m, self._keep_ratio(threshold_db)).run(signal)
-            return maps[0], maps[1], maps[2], {"reference_pixel": ref, "z1_m": z1_m}
+                maps, (z1_m, ref), *evaluated = fsk_graph(
+                    self.buffers, grid, pixels, freqs_hz, list(coarse), True, tx_m, rx_m, prior_m,
+                    self._keep_ratio(threshold_db), keep=keep).run(signal)
+            return maps[0], maps[1], maps[2], {"reference_pixel": ref, "z1_m": z1_m, **_evaluated(evaluated)}
+        if keep is not None:
+            raise ValueError("the fsk_keep skip runs on the device only on CUDA (keeps_on_device)")
         coarse_signal = np.ascontiguousarray(signal[:, :, coarse])
         return fsk.three_fsk(self.buffers, self._point_correlator(coarse_signal, freqs_hz[coarse], tx_m, rx_m),
                              self._point_correlator(signal, freqs_hz, tx_m, rx_m), grid, pixels, freqs_hz,
@@ -231,6 +252,11 @@ class WarpBackend(Backend):
             for module in (prior_kernels, fsk_kernels):
                 wp.load_module(module=module.__name__, device=self.device)
         self.warmed.add(key)
+
+
+def _evaluated(rest: list) -> dict:
+    """{"evaluated_px": n} from a KeptFskGraph's extra return value, {} from an FskGraph's."""
+    return {"evaluated_px": int(rest[0])} if rest else {}
 
 
 def _hull(x_m, y_m, z_m, hull_m) -> np.ndarray:

@@ -133,3 +133,62 @@ def test_frame_graph_restricts_to_the_roi_as_the_host_path_does(device):
     assert not valid[~pixels].any() and np.mean(valid != reference) <= 0.002
     assert np.max(np.abs(got_depth - expected.depth_m)[valid & reference]) < 1e-6
     assert np.array_equal(np.isfinite(got_mag), np.isfinite(expected.magnitude))
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+@pytest.mark.parametrize("freq", ["d05", "d05_d10"])
+def test_fsk_graph_with_the_keep_skip_equals_the_host_driven_skip(device, freq, monkeypatch):
+    """`fsk_keep` inside the FSK graph (KeptFskGraph: lattice pass, marks, neighbourhood compacted on the device)
+    against `keep_skip.run_where_kept` driven from the host on the same backend: the same pixels evaluated (fewer
+    than the ROI's: a small object), the same reference pixel, the guess within 1e-7 m, depths within 1e-6 m,
+    magnitudes within 1e-5 of the maximum, the same valid pixels but at the filter's edge (float32 phases: the
+    tolerances of test_gpu_mm3fsk), on fresh random frames with a region of interest; on CUDA `reconstruct_2fsk` /
+    `reconstruct_3fsk` take the graph."""
+    from methods.backends import backend_for
+    from methods.backends.warp.frame_graph import fsk_graph
+    from methods.fsk import keep_rule, reconstruct_2fsk
+    from methods.fsk3 import reconstruct_3fsk
+    from methods.skips.roi import Roi
+    from methods.skips.settings import SkipSettings
+
+    backend = backend_for(device)
+    rng = np.random.default_rng()
+    grid = square_grid(0.04, 41)
+    freqs_hz = MAROON_FREQS_HZ[config_indices(MAROON_FREQS_HZ, freq)]
+    three = len(freqs_hz) == 3
+    pixels = rng.random(grid.image_shape) < 0.9
+    z0 = rng.uniform(0.33, 0.45)
+    points = np.column_stack([rng.uniform(-0.008, 0.008, (12, 2)), np.full(12, z0)])
+    signal = simulate(points, np.exp(2j * np.pi * rng.random(12)), freqs_hz)
+    roi = Roi(pixels, -np.inf, np.inf, ("test",))
+    skips = SkipSettings(fsk_keep=True)
+    keep = keep_rule(skips, grid, 14.0)
+    assert keep is not None and keep[0] > 1
+    run = reconstruct_3fsk if three else reconstruct_2fsk
+    if backend.keeps_on_device:
+        via_reconstruct = run(signal, freqs_hz, ANTENNAS, grid, prior_m=0.40, backend=backend, roi=roi, skips=skips)
+    monkeypatch.setattr(backend, "keeps_on_device", False)          # the host-driven skip on the same backend
+    want = run(signal, freqs_hz, ANTENNAS, grid, prior_m=0.40, backend=backend, roi=roi, skips=skips)
+    maps, (z1_m, ref), evaluated = fsk_graph(backend.buffers, grid, pixels, freqs_hz, [1, 2] if three else [0, 1],
+                                             three, ANTENNAS.tx_m, ANTENNAS.rx_m, 0.40, 10.0 ** (-14.0 / 20.0),
+                                             keep=keep).run(signal)
+    assert evaluated == want.extra["roi_px"] and 0 < evaluated < pixels.sum()
+    # the host takes pass 1's correction with numpy's complex64 angle, the device with float32 atan2: z1 agrees to
+    # an ulp of the phase (0.04 m/rad x 2.4e-7 rad = 1e-8 m), so pass 2 runs at points that differ by that much
+    assert (ref, z1_m) == (want.extra["reference_pixel"], pytest.approx(want.extra["z1_m"], abs=1e-7))
+    assert np.array_equal(np.isfinite(maps[1]), np.isfinite(want.magnitude))       # the same pixels evaluated
+    valid, reference = np.isfinite(maps[0]), np.isfinite(want.depth_m)
+    assert valid.sum() > 10 and np.mean(valid != reference) <= 0.002                 # pixels at the filter's edge
+    # 3FSK: a weak pixel's coarse angle is ill-conditioned (points 1e-8 m apart can move its coarse depth by cm,
+    # measured 2-4e-5 of the maximum in its fine magnitude on the H100), so 3FSK's values compare where both keep
+    # the depth; 2FSK's refocus is common to every pixel, so its magnitudes compare everywhere evaluated
+    strong = (valid & reference) if three else np.isfinite(want.magnitude)
+    scale = np.nanmax(want.magnitude)
+    assert np.max(np.abs(maps[1] - want.magnitude)[strong]) < 1e-5 * scale
+    assert np.max(np.abs(maps[0] - want.depth_m)[valid & reference]) < 1e-6
+    if three:
+        assert np.array_equal(np.isfinite(maps[2]), np.isfinite(want.extra["coarse_depth_m"]))
+        assert np.max(np.abs(maps[2] - want.extra["coarse_depth_m"])[valid & reference]) < 1e-6
+    if device == CUDA:
+        assert via_reconstruct.extra["roi_px"] == evaluated
+        assert np.array_equal(np.isfinite(via_reconstruct.depth_m), valid)
