@@ -6,9 +6,7 @@ explicit `hydra.run.dir=` (with -m: `hydra.sweep.dir=`) that cannot be created e
 a traceback). A closed stdout (`python -m bench ... | head -1`) or Ctrl-C end quietly (bench.cli). Hydra's own
 messages for config mistakes (an unknown option of a group, with the list of options) are left as Hydra words them.
 """
-import atexit
 import logging
-import os
 import sys
 
 from bench import cli
@@ -47,21 +45,6 @@ def skip_mode_probe() -> None:
     Hydra.get_mode = lambda self, config_name, overrides: None
 
 
-def exit_at_once() -> None:
-    """After a finished run: what exiting does that matters (stdout flushed, so a closed pipe still ends as
-    bench.cli.run_guarded says; logging's handlers closed; the exit handlers run: the stage clock's file, temporary
-    folders), then the process ends without tearing its modules down (SciPy, pandas, h5py, Hydra, Warp: ~0.15 s on 2
-    cores). Where the interpreter offers no way to run the exit handlers first, it exits as usual."""
-    run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)
-    if run_exit_handlers is None:
-        return
-    sys.stdout.flush()
-    logging.shutdown()
-    run_exit_handlers()
-    sys.stderr.flush()
-    os._exit(0)
-
-
 def _main() -> None:
     stages.start_from_environment()    # python -m bench.perf experiment: seconds per stage, imports included
     logging.raiseExceptions = False    # a log line to a closed stdout is dropped, not a '--- Logging error ---' dump
@@ -70,7 +53,6 @@ def _main() -> None:
     from bench.harness.app import main
 
     main()
-    exit_at_once()
 
 
 cli.run_guarded(_main)
