@@ -220,16 +220,20 @@ def test_a_batch_is_composed_by_forked_workers_and_a_failure_is_composed_again_h
 def test_configurations_composed_by_the_workers_equal_those_composed_here():
     from hydra._internal.hydra import Hydra
     from hydra._internal.utils import create_config_search_path
+    from hydra.core.global_hydra import GlobalHydra
     from hydra.types import RunMode
     from omegaconf import OmegaConf
 
     from hydra_plugins.mm2fsk_bench import sweeper
 
-    loader = Hydra.create_main_hydra2(task_name="app", config_search_path=create_config_search_path(
-        str(CONFIG_DIR))).config_loader
-    master = loader.load_configuration("config", ["experiment=table3", "dataset=maroon", "dataset.root=/x"],
-                                       RunMode.MULTIRUN)
-    batch = [["cell=bp_d05"], ["cell=mm2fsk_d10"], ["cell=prior_only_d10"]]
-    forked = sweeper._compose_in_workers(loader, master, batch, 2)
-    here = [loader.load_sweep_config(master, o) for o in batch]
+    try:                        # Hydra's global state, as `python -m bench` sets it up: cleared for the next tests
+        loader = Hydra.create_main_hydra2(task_name="app", config_search_path=create_config_search_path(
+            str(CONFIG_DIR))).config_loader
+        master = loader.load_configuration("config", ["experiment=table3", "dataset=maroon", "dataset.root=/x"],
+                                           RunMode.MULTIRUN)
+        batch = [["cell=bp_d05"], ["cell=mm2fsk_d10"], ["cell=prior_only_d10"]]
+        forked = sweeper._compose_in_workers(loader, master, batch, 2)
+        here = [loader.load_sweep_config(master, o) for o in batch]
+    finally:
+        GlobalHydra.instance().clear()
     assert forked is not None and [OmegaConf.to_yaml(c) for c in forked] == [OmegaConf.to_yaml(c) for c in here]
