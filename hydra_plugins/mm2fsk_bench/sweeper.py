@@ -6,10 +6,10 @@ machine and 1.7 s on a loaded one, per job and per pass. Here the checked config
 the launcher when it asks for the same overrides, so each job is composed once. Launchers that compose in another
 process (joblib, submitit) compose there as before: the kept configurations are not sent along.
 
-A batch of several jobs is composed by forked worker processes, one per core (a composed configuration comes back
-pickled: ~1.5 ms to read against 60-200 ms to compose): 13 jobs of Table III take ~1.2 s one after another on the
-H100 host's CPU. Where that fails (a composition error, e.g. a typo in an override) the batch is composed here,
-one job after another, and the error is Hydra's own as before.
+A batch of several jobs is composed by forked worker processes, one per core, on machines of at least MIN_CORES
+cores (a composed configuration comes back pickled: ~1.5 ms to read against 60-200 ms to compose): 13 jobs of
+Table III take ~1.2 s one after another on the H100 host's CPU. Where that fails (a composition error, e.g. a typo
+in an override) the batch is composed here, one job after another, and the error is Hydra's own as before.
 """
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ class _ComposedOnce:
         """`keep` for every job of the batch, composed by forked workers where there are several jobs and cores
         (module doc); one after another here where that is not possible or fails."""
         workers = min(len(batch), _cores())
-        if workers > 1 and hasattr(os, "fork"):
+        if workers > 1 and _cores() >= MIN_CORES and hasattr(os, "fork"):
             with stages.stage("composition"):
                 composed = _compose_in_workers(self._loader, master_config, [list(o) for o in batch], workers)
             if composed is not None:
@@ -73,6 +73,7 @@ def _cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
+MIN_CORES = 4      # on 2 shared cores the workers made composition slower (table2 at load 4: 0.8 -> 1.0-1.1 s)
 _work: tuple = ()      # (loader, master configuration, batch) for the forked workers (set just before the fork)
 
 
