@@ -1,8 +1,9 @@
 """Image formation by algorithm, runtime against error: `python -m bench.perf formation`.
 
-`python -m bench.perf formation [--device cuda|warp-cpu] [--grid paper|small] [--frames N] [--parts columns,search]
-[--out DIR]` times, on frames no cache has seen (scatterers on a random curved surface at 0.3 m, every call a new
-scene), median and p90 over `--frames` frames after one untimed call:
+`python -m bench.perf formation [--device cuda|warp-cpu|cpu] [--grid paper|small] [--frames N]
+[--parts columns,search|range,bp2] [--out DIR]` times, on frames no cache has seen (scatterers on a random curved
+surface at 0.3 m, every call a new scene), median and p90 over `--frames` frames after one untimed call (default
+parts: columns,search on Warp devices, range,bp2 on the CPU):
 * `columns`: BP d05 (81.45 / 82.0 GHz) over the whole grid, `volume_peak` with the tensor-core/default kernel
   (today's path) beside the column-separable kernel at three rho steps (term bounds 1e-3, 1e-4, 1e-5); and for
   two frames the error of each against the fp32 separable kernel over every voxel (relative L2, max |.|
@@ -10,12 +11,23 @@ scene), median and p90 over `--frames` frames after one untimed call:
   -14 dB whose depth is within 0.1 mm of the fp32 separable volume's;
 * `search`: BP_max (128 frequencies) through `methods.bp.reconstruct_bp` with the device's default skips (coarse
   ROI, coarse-to-fine search), the search on the device (`device_search` on) beside the host-driven search (off),
-  same frames, interleaved; the share of pixels valid in both maps within 0.1 mm and the samples evaluated.
-Writes OUT/perf_formation_<device>.csv (OUT = `--out`, default outputs/perf/).
+  same frames, interleaved; the share of pixels valid in both maps within 0.1 mm and the samples evaluated;
+* `range` (CPU): BP_max through `reconstruct_bp` with the CPU's default skips (coarse ROI, coarse-to-fine search on
+  range-compressed profiles), `methods.backends.cpu_range` as it is (Q = 64 divided by sinc^2, points gathered in
+  depth order) beside its earlier version (Q = 32 plain linear interpolation, the caller's order, chunks of 256
+  points x 8 receivers), same frames interleaved: wall and CPU (process) time, the error
+  of each table's values against the float64 direct sum at 256 random voxels, and for the first frame the share of
+  pixels within -14 dB whose depth is within 0.1 mm of the same search on the per-frequency BLAS sum;
+* `bp2` (CPU): BP d05 through `reconstruct_bp` with the CPU's default skips, wall and CPU time.
+The CPU parts' rows carry the 1-minute load average. Writes OUT/perf_formation_<device>.csv (OUT = `--out`, default
+outputs/perf/).
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import functools
+import os
 import time
 
 import numpy as np
@@ -185,12 +197,93 @@ def search_rows(backend, antennas, n_xy: int, n_z: int, n_frames: int, rng) -> l
     return rows
 
 
+def _timed_bp(frame, freqs_hz, antennas, grid, backend, skips) -> tuple:
+    """(reconstruction, wall ms, CPU ms) of one `reconstruct_bp` call."""
+    start, cpu = time.perf_counter(), time.process_time()
+    rec = reconstruct_bp(frame, freqs_hz, antennas, grid, backend=backend, skips=skips)
+    return rec, (time.perf_counter() - start) * 1e3, (time.process_time() - cpu) * 1e3
+
+
+def _timing_row(part: str, impl: str, walls: list[float], cpus: list[float]) -> dict:
+    return {"part": part, "impl": impl, "frame_median_ms": percentile(walls, 50), "frame_p90_ms": percentile(walls, 90),
+            "cpu_median_ms": percentile(cpus, 50), "cpu_p90_ms": percentile(cpus, 90),
+            "load_1min": os.getloadavg()[0]}
+
+
+def range_rows(backend, antennas, n_xy: int, n_z: int, n_frames: int, rng) -> list[dict]:
+    """The `range` part (module doc)."""
+    from methods.backends import cpu_range
+
+    grid = RadarGrid((-0.15, -0.15, 0.2), (0.15, 0.15, 0.4), (n_xy, n_xy, n_z))
+    skips = skip_settings.default_for("bp", len(ALL_FREQS_HZ), backend.dense_beats_search)
+    frames = [scene_frame(antennas, ALL_FREQS_HZ, rng) for _ in range(n_frames + 1)]
+    new = {name: getattr(cpu_range, name) for name in ("range_table", "DEPTH_ORDER", "CHUNK_POINTS", "RX_BLOCK")}
+    variants = {"Q64 / sinc^2, depth order (new)": new,
+                "Q32 linear, search order (old)": dict(
+                    range_table=functools.partial(new["range_table"], oversampling=32, deconvolve=False),
+                    DEPTH_ORDER=False, CHUNK_POINTS=256, RX_BLOCK=8)}
+    tables = {name: v["range_table"] for name, v in variants.items()}
+    runs: dict = {name: {"wall": [], "cpu": [], "rec": []} for name in tables}
+    try:
+        for i, frame in enumerate(frames):
+            for name, variant in variants.items():
+                for attr, value in variant.items():
+                    setattr(cpu_range, attr, value)
+                rec, wall, cpu = _timed_bp(frame, ALL_FREQS_HZ, antennas, grid, backend, skips)
+                if i > 0:
+                    runs[name]["wall"].append(wall)
+                    runs[name]["cpu"].append(cpu)
+                runs[name]["rec"].append(rec)
+    finally:
+        for attr, value in new.items():
+            setattr(cpu_range, attr, value)
+    exact_skips = dataclasses.replace(skips, bp_range_cpu=False)
+    exact = reconstruct_bp(frames[0], ALL_FREQS_HZ, antennas, grid, backend=backend, skips=exact_skips)
+    zz, yy, xx = np.meshgrid(grid.z_m, grid.y_m, grid.x_m, indexing="ij")
+    pick = rng.integers(0, xx.size, 256)
+    points = np.column_stack([xx.ravel()[pick], yy.ravel()[pick], zz.ravel()[pick]])
+    ref64 = [correlate_reference(f, ALL_FREQS_HZ, antennas.tx_m, antennas.rx_m, points, sum_freqs=True)
+             for f in frames[:2]]
+    rows = []
+    for name, table in tables.items():
+        row = _timing_row("range", name, runs[name]["wall"], runs[name]["cpu"])
+        for i, ref in enumerate(ref64):
+            got = cpu_range.correlate_range_cpu(
+                table(frames[i], ALL_FREQS_HZ, *cpu_range.path_bounds_m(antennas.tx_m, antennas.rx_m, points)),
+                antennas.tx_m, antennas.rx_m, points)
+            row[f"rel_l2_vs_f64_256_f{i}"] = float(np.linalg.norm(got - ref) / np.linalg.norm(ref))
+            row[f"max_mag_diff_f{i}"] = float(np.max(np.abs(np.abs(got) - np.abs(ref))) / np.abs(ref).max())
+        rec = runs[name]["rec"][0]
+        kept = np.isfinite(exact.depth_m) & (exact.magnitude >= np.nanmax(exact.magnitude) * 10 ** (-KEEP_DB / 20))
+        row["depth_within_0p1mm_of_blas_pct_f0"] = 100.0 * float(np.mean(np.abs(rec.depth_m[kept] - exact.depth_m[kept])
+                                                                        <= DEPTH_TOL_M))
+        row["evaluated_median"] = float(np.median([r.extra.get("evaluated_voxels", 0) for r in runs[name]["rec"]]))
+        rows.append(row)
+        print(rows[-1], flush=True)
+    return rows
+
+
+def bp2_rows(backend, antennas, n_xy: int, n_z: int, n_frames: int, rng) -> list[dict]:
+    """The `bp2` part (module doc)."""
+    grid = RadarGrid((-0.15, -0.15, 0.2), (0.15, 0.15, 0.4), (n_xy, n_xy, n_z))
+    skips = skip_settings.default_for("bp", len(D05_HZ), backend.dense_beats_search)
+    walls, cpus = [], []
+    for i, frame in enumerate(scene_frame(antennas, D05_HZ, rng) for _ in range(n_frames + 1)):
+        _, wall, cpu = _timed_bp(frame, D05_HZ, antennas, grid, backend, skips)
+        if i > 0:
+            walls.append(wall)
+            cpus.append(cpu)
+    rows = [_timing_row("bp2", "BP d05, default skips", walls, cpus)]
+    print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench.perf formation", description=__doc__.split("\n")[0])
-    parser.add_argument("--device", default="cuda", choices=["cuda", "warp-cpu"])
+    parser.add_argument("--device", default="cuda", choices=["cuda", "warp-cpu", "cpu"])
     parser.add_argument("--grid", default="paper", choices=list(GRIDS))
     parser.add_argument("--frames", type=int, default=8)
-    parser.add_argument("--parts", default="columns,search")
+    parser.add_argument("--parts", default=None, help="default: columns,search (Warp devices), range,bp2 (cpu)")
     parser.add_argument("--out", type=lambda s: __import__("pathlib").Path(s), default=DEFAULT_OUT)
     args = parser.parse_args(argv)
     from methods.backends import backend_for
@@ -200,11 +293,16 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(2026)
     n_xy, n_z = GRIDS[args.grid]
     rows = []
-    parts = args.parts.split(",")
+    parts = (args.parts or ("range,bp2" if args.device == "cpu" else "columns,search")).split(",")
+    print(f"uptime: load {os.getloadavg()}", flush=True)
     if "columns" in parts:
         rows += columns_rows(backend, antennas, n_xy, n_z, args.frames, rng)
     if "search" in parts:
         rows += search_rows(backend, antennas, n_xy, n_z, args.frames, rng)
+    if "range" in parts:
+        rows += range_rows(backend, antennas, n_xy, n_z, args.frames, rng)
+    if "bp2" in parts:
+        rows += bp2_rows(backend, antennas, n_xy, n_z, args.frames, rng)
     for row in rows:
         row.update(device=backend.name, grid=args.grid)
     write_rows(rows, args.out / f"perf_formation_{backend.name}.csv")

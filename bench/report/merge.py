@@ -6,11 +6,21 @@ Sweep root after `python -m bench -m experiment=table3`: `results.csv` (every jo
 `depth_errors/<object>_<distance>_<frame>.png` (bench.report.plots; off by default: the figures cost more than the
 rest of the merge).
 `python -m bench.report.merge ROOT [--table NAME]` does the same for a sweep that was interrupted before the end.
+
+In a multirun the merge runs in a worker process (`Worker`, forked from the sweep's process) started when its first
+job ends: it imports what the merge needs beyond what the jobs imported (SciPy's statistics, matplotlib: ~0.6 s on
+a quiet 2-core machine) while the other jobs run, then waits for the sweep root on a pipe; the callback hands it
+over at the multirun's end and waits for it. Its errors are its own lines on stderr and its exit code is the
+sweep's (as in one process).
 """
 from __future__ import annotations
 
 import csv
 import io
+import json
+import os
+import sys
+import traceback
 from pathlib import Path
 
 import pandas as pd
@@ -19,7 +29,6 @@ from omegaconf import DictConfig
 
 from bench import cli
 from bench.harness.results import write_results
-from bench.report import tables
 from methods.domain.errors import DatasetError
 
 
@@ -61,9 +70,9 @@ def merge(root: Path) -> pd.DataFrame:
 def report(root: Path, table: str | None, depth_errors: bool = False) -> pd.DataFrame:
     """Merge the rows; with a table name also write the table (md, csv with its pairs, tex) and the runtime plot,
     and with depth_errors the per-capture depth-error figures; returns the summary."""
-    from bench.report import (
-        plots,  # matplotlib (~1 s): only at the end of a sweep, not in every run that loads the callback
-    )
+    # here, not at the top: the sweep's own process loads the callback, and it needs neither matplotlib (~1 s) nor
+    # the tables' SciPy statistics (~0.3 s) when the worker merges
+    from bench.report import plots, tables
 
     rows = merge(root)
     summary = tables.summarise(rows)
@@ -93,12 +102,115 @@ def runtime_plot(root: Path, table: str, summary: pd.DataFrame) -> Path:
     return path
 
 
+class Worker:
+    """The merge's worker process (module doc): forked from this process, so it shares the modules this process has
+    imported (NumPy, pandas) and imports only the rest (SciPy's statistics, matplotlib); it reads one request from
+    a pipe and exits with 0 (done, or no request: the multirun ended without a merge), 2 after a user error (its
+    one `error:` line on stderr) or 1 after a bug (its traceback on stderr). It never runs this process's exit
+    handlers (e.g. the stage clock's, bench.harness.stages): the waiting process counts the merge."""
+
+    def __init__(self):
+        read_fd, self._write_fd = os.pipe()
+        self.pid = os.fork()
+        if self.pid == 0:                    # the worker
+            os.close(self._write_fd)
+            code = 1
+            try:
+                code = _serve(read_fd)
+            except KeyboardInterrupt:
+                code = cli.EXIT_INTERRUPTED
+            except BaseException:            # noqa: BLE001 -- a bug: its traceback, exit 1
+                traceback.print_exc()
+            finally:
+                sys.stderr.flush()
+                os._exit(code)     # without tearing down pandas, SciPy and matplotlib (~0.2 s the sweep would wait)
+        os.close(read_fd)
+
+    def hand_over(self, request: dict | None) -> int:
+        """Send the request (None: nothing to merge) and wait for the worker's exit code."""
+        try:
+            if request is not None:
+                os.write(self._write_fd, json.dumps(request).encode())
+        except BrokenPipeError:              # it ended early (its error is on stderr); its exit code says
+            pass
+        finally:
+            os.close(self._write_fd)
+        return os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
+
+
+def _warm_up() -> None:
+    """The merge's first-use costs, paid while the jobs run: its imports, pandas' LaTeX writer (jinja2 templates),
+    matplotlib's Agg canvas, fonts and PNG writer (a throwaway plot): ~0.1 s less to wait for at the end."""
+    from bench.report import keyed, plots, tables  # noqa: F401
+
+    pd.DataFrame({"a": [1.0]}).style.to_latex()
+    one_row = pd.DataFrame({"method": ["m"], "row": ["r"], "runtime_ms": [1.0], "P_cm": [1.0], "captures": [1],
+                            "failed": [0]})
+    plots.runtime_vs_error(one_row, io.BytesIO(), "")
+
+
+def _serve(read_fd: int) -> int:
+    """The worker's side: the merge's imports, then the request from the pipe."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())    # its stdout is the sweep's: the merge itself prints nothing
+    _warm_up()
+    with os.fdopen(read_fd, "rb") as pipe:
+        request = pipe.read()
+    if not request.strip():
+        return 0
+    work = json.loads(request)
+    try:
+        report(Path(work["root"]), work["table"], bool(work["depth_errors"]))
+    except Exception as err:   # noqa: BLE001 -- a file or disk problem in one line (bench.cli); bugs re-raised
+        message = cli.error_line(err)
+        if message is None:
+            raise
+        print(f"error: {' '.join(message.split())}", file=sys.stderr)
+        return cli.EXIT_USER_ERROR
+    return 0
+
+
+def start_worker() -> Worker | None:
+    """The merge's worker, or None where processes cannot fork (the merge then runs in this process)."""
+    return Worker() if hasattr(os, "fork") else None
+
+
+def finish_worker(worker: Worker, root: Path, table: str | None, depth_errors: bool) -> None:
+    """Hand the sweep to the worker and wait: its exit code 2 (one `error:` line of its own on stderr) ends this
+    process with 2 too; any other failure is raised."""
+    code = worker.hand_over({"root": str(root), "table": table, "depth_errors": depth_errors})
+    if code == cli.EXIT_USER_ERROR:
+        sys.exit(code)
+    if code != 0:
+        raise RuntimeError(f"the merge of {root} failed (exit code {code}; its error above)")
+
+
 class MergeResults(Callback):
-    """Hydra callback (configs/config.yaml `hydra.callbacks.merge`): `report` at the end of every multirun."""
+    """Hydra callback (configs/config.yaml `hydra.callbacks.merge`): `report` at the end of every multirun, in the
+    worker (module doc) started when the multirun's first job ends in this process: not before, where its imports
+    would compete with composing the jobs and the first job's own imports (measured on 2 loaded cores: composition
+    0.5 -> 1.9 s), and not where the jobs run in other processes (joblib, SLURM), which merge here, in this process."""
+
+    def __init__(self):
+        self._worker: Worker | None = None
+        self._sweep_pid: int | None = None
+
+    def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
+        self._sweep_pid = os.getpid()
+
+    def on_job_end(self, config: DictConfig, job_return, **kwargs) -> None:
+        if self._worker is None and self._sweep_pid == os.getpid():
+            self._worker = start_worker()
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
+        root, table = Path(config.hydra.sweep.dir), config.report.table
+        depth_errors = config.report.get("depth_errors", False)
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            finish_worker(worker, root, table, depth_errors)
+            return
         try:
-            report(Path(config.hydra.sweep.dir), config.report.table, config.report.get("depth_errors", False))
+            report(root, table, depth_errors)
         except Exception as err:   # noqa: BLE001 -- a file or disk problem in one line (bench.cli); bugs re-raised
             message = cli.error_line(err)
             if message is None:
@@ -107,6 +219,8 @@ class MergeResults(Callback):
 
 
 def main() -> int:
+    from bench.report import tables
+
     parser = cli.ArgumentParser(prog="python -m bench.report.merge", description=__doc__)
     parser.add_argument("root", type=Path, help="sweep root (holding <job>/results.csv)")
     parser.add_argument("--table", choices=sorted(tables.TITLES))

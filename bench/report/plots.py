@@ -11,9 +11,17 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
+from matplotlib.ticker import LogFormatter  # noqa: E402
 
 MARKERS = "osD^vP*Xph<>"   # the rows of one method in the runtime plot (its colour), repeating beyond 12
 ERROR_LIMIT_CM = 2.0     # colour scale of the signed error maps: -2 .. +2 cm (larger errors saturate)
+
+
+class _PlainLogLabels(LogFormatter):
+    """Log-axis tick labels as plain numbers (`%g`: 0.4, 2, 50), where LogFormatter writes 4e-01 below 1."""
+
+    def _num_to_string(self, x, vmin, vmax):
+        return f"{x:g}"
 
 
 def pareto_front(runtime_ms: np.ndarray, error_cm: np.ndarray) -> np.ndarray:
@@ -49,6 +57,9 @@ def runtime_vs_error(summary: pd.DataFrame, path: Path, title: str) -> Path:
            title=f"{title}{note}")
     if len(shown):
         ax.set(xscale="log", yscale="log")
+        for axis in (ax.xaxis, ax.yaxis):    # plain-text labels (10, 20, 0.5): the default's mathtext costs a merge
+            axis.set_major_formatter(_PlainLogLabels(labelOnlyBase=False))       # ~0.15 s for its parser
+            axis.set_minor_formatter(_PlainLogLabels(labelOnlyBase=False, minor_thresholds=(2, 0.5)))
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     else:
         ax.text(0.5, 0.5, "no runtime measured alone\n(run the sweep one job at a time)", ha="center",

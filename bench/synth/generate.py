@@ -248,9 +248,9 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
 
 
 def capture_workers() -> int:
-    """Captures built at once: one per leg_sum.PARTIAL_SUMS cores (each capture's radar sums take that many threads)
-    and at least two, so that one capture's single-threaded stages (ray casting, camera, files) overlap another's
-    sums: on 2 almost quiet cores the 8 captures took 17.0 s against 21.0 s one at a time (at load ~10 it was the
-    other way round: docs/measurements/synth.md)."""
+    """Captures built at once: one per leg_sum.PARTIAL_SUMS cores and at least two, so that one capture's
+    single-threaded stages (ray casting, camera, files) overlap the others' radar sums (which share one pool of a
+    thread per core, bench.synth.radar.leg_sum): on 2 almost quiet cores the 8 captures took 17.0 s against 21.0 s
+    one at a time (at load ~10 it was the other way round: docs/measurements/synth.md)."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
     return max(2, cores // PARTIAL_SUMS)

@@ -4,22 +4,28 @@ frames with many frequencies (BP_max), one gather per antenna pair and point ins
 With frequencies on an equidistant grid (`methods.ops.range_compression.plan`), the pair sum over frequencies at path
 length d is `exp(j k_c d) g_rt(d)` with the baseband range profile `g_rt(d) = sum_n S_rtn exp(j 2 pi (i_n - n_c)
 df d / c)`. The profile is sampled once per frame at L = Q * n_grid points per period c / df (Q = OVERSAMPLING,
-32 here: the table stays in memory, unlike the GPU's L2-bound fp16 table) but only over the path lengths the points
-can reach (a window of ~0.7 m at the paper's box: 8836 pairs x ~750 samples x 8 B = 53 MB), as one complex64 matrix
-product (pairs x F) @ (F x window) - the inverse DFT restricted to the window (`profiles_numpy`'s FFT is its
+64 here: the table stays in memory, unlike the GPU's L2-bound fp16 table) but only over the path lengths the points
+can reach (a window of ~0.7 m at the paper's box: 8836 pairs x ~1500 samples x 2 x 8 B = 210 MB), as one complex64
+matrix product (pairs x F) @ (F x window) - the inverse DFT restricted to the window (`profiles_numpy`'s FFT is its
 float64 check). Per point: `d = 2|p| + e_rx + e_tx` with the cancellation-free excesses of `backend_numpy`, the
 profile interpolated linearly at d, times the carrier `exp(j k_c d)` = common phasor (float64, reduced mod 2 pi) x
 rx steering x tx steering (separable, so 188 sincos per point instead of 8836).
 
-Error: linear interpolation of a tone at nu cycles per sample loses at most (pi nu)^2 / 2 at half-sample offsets;
-the profile's band reaches nu = 1 / (2 Q), so the worst-case amplitude error is pi^2 / (8 Q^2) = 0.12 % at Q = 32;
-measured ~5e-4 relative against the float64 direct sum on random frames (tests: RANGE_CPU_REL_TOL = 2e-3).
+Error: linear interpolation of a tone at nu cycles per sample returns it times (1 - t) exp(-j 2 pi nu t) + t exp(j 2
+pi nu (1 - t)) at offset t, whose mean over t is sinc^2(nu) (the triangle kernel's response); the table divides
+each frequency by sinc^2(nu_n) (`deconvolve`, as a NUFFT divides by its kernel's transform), leaving the part that
+varies with t: rms 9e-5, max 2e-4 at the band edge nu = 1 / (2 Q) for Q = 64 (3.6e-4 / 8e-4 at Q = 32, 8.8e-4 /
+1.2e-3 at Q = 32 without the division). Measured against the float64 direct sum on random scenes (128 frequencies,
+docs/measurements/formation.md): 3e-5 relative L2 (Q = 32 without the division, the earlier default: 4.3e-4, above
+the 1e-4 BP must meet); tests: RANGE_CPU_REL_TOL. The table is twice Q = 32's and the gather ~10-25 % slower.
 Cost (measured, docs/measurements/gpu.md): ~4-7x less than the per-frequency BLAS sum at 128 frequencies on the 2-core
 CPU; it pays from ~16 frequencies on (`worth_it`).
 
-Layout: points in chunks of CHUNK_POINTS, and in each chunk the pairs in blocks of RX_BLOCK receive rows, arrays
-ordered (rx, tx, point) so that one pair's samples for all points of a chunk are gathered together (one cache
-miss per pair row per chunk instead of one per point); chunks run on worker threads (numpy releases the GIL).
+Layout: points sorted by depth, in chunks of CHUNK_POINTS, and in each chunk the pairs in blocks of RX_BLOCK receive
+rows, arrays ordered (rx, tx, point) so that one pair's samples for all points of a chunk are gathered together
+(points at one depth have close paths, so few cache lines per pair row and chunk: 7.8 against 12.4 ns per pair
+and point in BP's search order, docs/measurements/formation.md); chunks run on worker threads (numpy releases the
+GIL).
 """
 from __future__ import annotations
 
@@ -35,10 +41,13 @@ from methods.backends.cpu import phasor_mod_2pi as _phasor_mod_2pi
 from methods.domain.radar import C_M_PER_S
 from methods.ops import range_compression
 
-OVERSAMPLING = 32          # Q on the CPU (profile samples per frequency-grid bin)
+OVERSAMPLING = 64          # Q on the CPU (profile samples per frequency-grid bin)
+RANGE_CPU_REL_TOL = 1e-4   # stated bound of ||range - direct|| / ||direct|| (measured 3e-5)
 MIN_FREQS = 16             # from this many frequencies on, BP's CPU depth search uses range compression
-CHUNK_POINTS = 256         # points per chunk: (RX_BLOCK x 94 x 256) work arrays of ~1.5 MB stay in L2
-RX_BLOCK = 8               # receive rows per gather block
+CHUNK_POINTS = 1024        # points per chunk (depth-ordered: larger chunks share more cache lines per pair row) ...
+RX_BLOCK = 4               # ... receive rows per gather block: (4 x 94 x 1024) work arrays, 6.7 against 8.1 ns per
+                           # pair and point for 256 x 8 (docs/measurements/formation.md)
+DEPTH_ORDER = True         # chunks of points sorted by depth (False: in the caller's order, for the benchmark)
 
 
 @dataclass(frozen=True)
@@ -67,11 +76,14 @@ def path_bounds_m(tx_m: np.ndarray, rx_m: np.ndarray, points_m: np.ndarray) -> t
     return range_compression.path_bounds_m(tx_m, rx_m, points_m.min(axis=0), points_m.max(axis=0))
 
 
-def range_table(signal: np.ndarray, freqs_hz: np.ndarray, path_min_m: float, path_max_m: float) -> RangeTable:
+def range_table(signal: np.ndarray, freqs_hz: np.ndarray, path_min_m: float, path_max_m: float,
+                oversampling: int = OVERSAMPLING, deconvolve: bool = True) -> RangeTable:
     """Windowed range profiles of `signal` (n_rx, n_tx, F) covering paths [path_min_m, path_max_m], normalised by
-    n_rx * n_tx like `correlate`. Raises ValueError when the frequencies are not on an equidistant grid."""
+    n_rx * n_tx like `correlate`, each frequency divided by the linear interpolation's mean response sinc^2(nu_n)
+    unless `deconvolve` is False (module doc). Raises ValueError when the frequencies are not on an equidistant
+    grid."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
-    rplan = range_compression.plan(freqs_hz, OVERSAMPLING)
+    rplan = range_compression.plan(freqs_hz, oversampling)
     if rplan is None:
         raise ValueError("CPU range compression needs >= 2 distinct frequencies on an equidistant grid")
     n_rx, n_tx, n_freqs = signal.shape
@@ -80,7 +92,10 @@ def range_table(signal: np.ndarray, freqs_hz: np.ndarray, path_min_m: float, pat
     # and reduced mod L before the trigonometry (arguments up to ~1e5 cycles otherwise)
     cycles = np.outer(rplan.grid_index - rplan.n_centre, m0 + np.arange(n_window, dtype=np.float64))
     cycles = np.mod(cycles, rplan.n_samples) / rplan.n_samples
-    dft = np.exp(2j * np.pi * cycles).astype(np.complex64)                              # (F, n_window)
+    dft = np.exp(2j * np.pi * cycles)                                                   # (F, n_window)
+    if deconvolve:
+        dft /= np.sinc((rplan.grid_index - rplan.n_centre) / rplan.n_samples)[:, None] ** 2
+    dft = dft.astype(np.complex64)
     pairs = (signal.reshape(n_rx * n_tx, n_freqs) / (n_rx * n_tx)).astype(np.complex64)
     values = (pairs @ dft).ravel()
     slopes = np.empty_like(values)
@@ -137,10 +152,13 @@ def correlate_range_cpu(table: RangeTable, tx_m: np.ndarray, rx_m: np.ndarray, p
     points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     out = np.empty(len(points_m), dtype=np.complex64)
     starts = range(0, len(points_m), CHUNK_POINTS)
+    # chunks of points at nearly the same depth: each pair's samples of a chunk then lie close together in its
+    # profile row (BP's search hands over a pixel's depths one after another; measured 1.5x faster in depth order)
+    order = np.argsort(points_m[:, 2], kind="stable") if DEPTH_ORDER else np.arange(len(points_m))
 
     def work(start: int) -> None:
-        stop = min(start + CHUNK_POINTS, len(points_m))
-        out[start:stop] = _chunk(table, tx_m, rx_m, points_m[start:stop])
+        chunk = order[start:start + CHUNK_POINTS]
+        out[chunk] = _chunk(table, tx_m, rx_m, points_m[chunk])
 
     n_threads = _n_threads()
     with threadpool_limits(limits=1, user_api="blas"):

@@ -159,6 +159,8 @@ DOC_RUNS: dict[str, list[str]] = {
         ["{py} -m bench.report.agreement --help"],
     ".venv/bin/python -m bench.perf formation --device cuda --frames 8":
         ["{py} -m bench.perf formation --help"],       # needs a GPU; its parts run in test_perf_formation
+    ".venv/bin/python -m bench.perf formation --device cpu --frames 3":
+        ["{py} -m bench.perf formation --help"],       # minutes per BP_max frame; its parts run in test_perf_formation
     ".venv/bin/python -m bench.perf stream [--device cpu|cuda] [--root DIR --capture OBJECT/DISTANCE]":
         ["{py} -m bench.perf stream --help"],          # generates a 10-frame sequence; runs in test_perf_stream
     ".venv/bin/python -m bench.perf overhead --root data/synthetic [--device cpu|cuda] [--grid paper]":

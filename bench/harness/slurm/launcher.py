@@ -43,7 +43,6 @@ from pathlib import Path
 from hydra.core.singleton import Singleton
 from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 from omegaconf import DictConfig, OmegaConf, open_dict
-from submitit.core.utils import FailedJobError, UncompletedJobError
 
 from bench import cli
 from bench.harness import validate
@@ -229,6 +228,8 @@ def result_cause(result: JobReturn, timeout_min: int, signal_delay_s: int) -> st
     SLURM's time-limit warning comes (submitit's --signal, `signal_delay_s` before the limit) raises submitit's
     UncompletedJobError in the task (the launcher never requeues: max_num_timeout 0); Hydra keeps that exception
     in a FAILED JobReturn, which submitit stores as a successful result, so sacct says COMPLETED."""
+    from submitit.core.utils import UncompletedJobError  # here: Hydra's plugin scan imports this module in every run
+
     if result.status != JobStatus.FAILED:
         return None
     err = result._return_value       # the JobReturn's exception (its `return_value` property re-raises it)
@@ -263,6 +264,7 @@ class CheckedSlurmLauncher(SlurmLauncher):
 
     def launch(self, job_overrides, initial_job_idx: int) -> list[JobReturn]:
         import submitit
+        from submitit.core.utils import FailedJobError
 
         check_slurm_commands(self.config.hydra.runtime.choices.get("hydra/launcher") or "slurm")
         paths = self._paths()

@@ -10,11 +10,17 @@ factored out and is computed at a few node frequencies and interpolated to all (
 
 Phases are formed in float64 and reduced modulo one cycle; across equidistant nodes the phasors advance by one
 complex64 multiply per step and are re-formed exactly every `RESEED_STEPS` nodes. Blocks alternate between
-PARTIAL_SUMS sums, one thread each, added in a fixed order: results do not depend on the machine's thread count.
+PARTIAL_SUMS sums, added in a fixed order: results do not depend on the machine's thread count. Each block's
+contribution is computed on one process-wide pool of threads, one per core, shared by the captures built at once
+(a capture's blocks then use the cores other captures have finished with: the bowl's multipath is the catalogue's
+long pole), and added to its sum in block order.
 """
 from __future__ import annotations
 
+import collections
 import contextlib
+import functools
+import os
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -89,30 +95,51 @@ class _BlasLimit:
 single_threaded_blas = _BlasLimit()
 
 
+@functools.cache
+def _threads() -> int:
+    """Threads of the block pool: one per core, at least PARTIAL_SUMS."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return max(PARTIAL_SUMS, cores)
+
+
+@functools.cache
+def _block_pool() -> ThreadPoolExecutor:
+    """The process-wide pool computing blocks (module doc)."""
+    return ThreadPoolExecutor(_threads(), thread_name_prefix="leg-sum")
+
+
 def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: np.ndarray) -> np.ndarray:
     """The frame (n_rx, n_tx, F) complex64 of all rows; `positions` (K, D) places the rows for blocking."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     outs = [np.zeros((len(freqs_hz), n_rx, n_tx), dtype=np.complex64) for _ in range(PARTIAL_SUMS)]
     blocks = compact_blocks(np.asarray(positions, dtype=np.float64), BLOCK_ROWS)
+    pool = _block_pool()
 
-    def accumulate(k: int) -> None:
-        for rows in blocks[k::PARTIAL_SUMS]:
-            add_block(outs[k], *legs(rows), freqs_hz)
+    def block(rows: np.ndarray) -> np.ndarray | None:
+        return block_sum(*legs(rows), freqs_hz, n_rx)
 
-    with single_threaded_blas(), ThreadPoolExecutor(PARTIAL_SUMS) as pool:
-        list(pool.map(accumulate, range(PARTIAL_SUMS)))
+    window = 2 * _threads()      # blocks in flight (each result is F x n_rx x n_tx complex64: ~9 MB)
+    pending: collections.deque = collections.deque()
+    with single_threaded_blas():
+        for number, rows in enumerate(blocks):
+            pending.append((number, pool.submit(block, rows)))
+            while len(pending) >= window or (number == len(blocks) - 1 and pending):
+                done, future = pending.popleft()
+                contribution = future.result()
+                if contribution is not None:
+                    outs[done % PARTIAL_SUMS] += contribution
     out = outs[0]
     for other in outs[1:]:
         out += other
     return np.ascontiguousarray(out.transpose(1, 2, 0))
 
 
-def add_block(out: np.ndarray, path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray) -> None:
-    """Add one block's sum to out[f, rx, tx] (path_m, weight: (n_rx + n_tx, k), receive legs first): at the node
-    frequencies, then interpolated to every frequency."""
+def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx: int) -> np.ndarray | None:
+    """One block's sum (F, n_rx, n_tx) complex64 (path_m, weight: (n_rx + n_tx, k), receive legs first; None for
+    no rows): at the node frequencies, then interpolated to every frequency. Added to a sum it gives what adding
+    node by node gave (0 + x is x)."""
     if path_m.shape[1] == 0:
-        return
-    n_rx = out.shape[1]
+        return None
     low, high = path_m.min(axis=1), path_m.max(axis=1)
     centre = 0.5 * (low + high)
     # every pair's path lies within centre_rx + centre_tx +- (largest receive half-span + largest transmit one)
@@ -121,7 +148,7 @@ def add_block(out: np.ndarray, path_m: np.ndarray, weight: np.ndarray, freqs_hz:
     if fit is None:                 # direct: every frequency is a node, nothing to factor out
         centre[:] = 0.0
     offsets_m = path_m - centre[:, None]
-    at_nodes = out if fit is None else np.empty((len(nodes_hz),) + out.shape[1:], dtype=np.complex64)
+    at_nodes = np.empty((len(nodes_hz), n_rx, path_m.shape[0] - n_rx), dtype=np.complex64)
     steps_hz = np.diff(nodes_hz)
     equidistant = len(steps_hz) > 0 and np.allclose(steps_hz, steps_hz[0], rtol=1e-9, atol=1e-3)
     reseed = RESEED_STEPS if equidistant else 1
@@ -132,15 +159,11 @@ def add_block(out: np.ndarray, path_m: np.ndarray, weight: np.ndarray, freqs_hz:
             phasor *= weight
         else:
             phasor *= step
-        product = phasor[:n_rx] @ phasor[n_rx:].T                 # rows: receive legs, then transmit legs
-        if fit is None:
-            at_nodes[n] += product
-        else:
-            at_nodes[n] = product
+        np.matmul(phasor[:n_rx], phasor[n_rx:].T, out=at_nodes[n])     # rows: receive legs, then transmit legs
     if fit is None:
-        return
-    every = (fit @ at_nodes.reshape(len(nodes_hz), -1)).reshape(out.shape)
+        return at_nodes
+    every = (fit @ at_nodes.reshape(len(nodes_hz), -1)).reshape((len(freqs_hz), *at_nodes.shape[1:]))
     centre_phasor = exact_phasors(centre[None, :], freqs_hz[:, None])          # the centre path, factored out
     every *= centre_phasor[:, :n_rx, None]
     every *= centre_phasor[:, None, n_rx:]
-    out += every
+    return every

@@ -84,12 +84,22 @@ def bounce_pairs(part_tris_m: list[np.ndarray], samples: SurfaceSamples, reflect
     return _audible(pairs, antennas_m) if antennas_m is not None else pairs
 
 
+AUDIBLE_ROWS = 8192       # pairs per chunk of `_audible` (a (rows, antennas) float64 array: 12 MB)
+
+
 def _audible(pairs: BouncePairs, antennas_m: np.ndarray) -> BouncePairs:
     """The pairs whose doubly reflected lobe reaches some antenna with a gain of at least LOBE_CUTOFF (the others add
-    less than 1e-2 of their amplitude to any sample, as radar_scene skips the direct echo's sideways samples)."""
-    to_antenna = antennas_m[None] - pairs.second_m[:, None, :]
-    cos_lobe = np.einsum("kec,kc->ke", to_antenna, pairs.outgoing) / np.linalg.norm(to_antenna, axis=2)
-    best = np.arccos(np.clip(cos_lobe.max(axis=1), -1.0, 1.0))
+    less than 1e-2 of their amplitude to any sample, as radar_scene skips the direct echo's sideways samples).
+    The cosines come from matrix products (leg_distances), in chunks: the (pairs, antennas, 3) differences cost
+    ~2 s for a concave shell's pairs on two cores."""
+    best_cos = np.empty(len(pairs.hop_m))
+    for start in range(0, len(best_cos), AUDIBLE_ROWS):
+        rows = slice(start, start + AUDIBLE_ROWS)
+        second, outgoing = pairs.second_m[rows], pairs.outgoing[rows]
+        cos_lobe = (antennas_m @ outgoing.T - np.einsum("kc,kc->k", second, outgoing)) / leg_distances(second,
+                                                                                                        antennas_m)
+        best_cos[rows] = cos_lobe.max(axis=0)
+    best = np.arccos(np.clip(best_cos, -1.0, 1.0))
     keep = np.exp(-0.5 * (best / pairs.lobe_rad) ** 2) >= LOBE_CUTOFF
     return BouncePairs(*(getattr(pairs, f.name)[keep] for f in dataclasses.fields(BouncePairs)))
 

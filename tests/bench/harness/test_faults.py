@@ -441,6 +441,36 @@ def test_the_code_version_follows_the_import_graph_of_the_compute_path(tmp_path)
                                                       "methods.named"]
 
 
+def test_the_cached_code_version_is_the_computed_one_and_any_source_edit_computes_it_again(tmp_path, monkeypatch):
+    from bench.harness import codeversion
+
+    tree = {"bench/__init__.py": "", "bench/harness/__init__.py": "", "bench/harness/app.py": "from . import grids\n",
+            "bench/harness/grids.py": "X = 1\n", "bench/report.py": "", "methods/__init__.py": ""}
+    root = tmp_path / "tree"
+    for name, text in tree.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text(text)
+    cache = tmp_path / "cache" / "code_version.json"
+    computed = []
+    real = codeversion._compute_version
+    monkeypatch.setattr(codeversion, "_compute_version", lambda root: computed.append(1) or real(root))
+    first = codeversion.cached_version(root, cache)
+    assert first == real(root) and codeversion.cached_version(root, cache) == first and len(computed) == 1
+    (root / "bench/report.py").write_text("# outside the compute path: same version, but followed again\n")
+    assert codeversion.cached_version(root, cache) == first and len(computed) == 2
+    (root / "bench/harness/grids.py").write_text("X = 2\n")
+    second = codeversion.cached_version(root, cache)
+    assert second != first and second == real(root) and len(computed) == 3
+    (root / "bench/harness/new.py").write_text("")            # a new file: a new key, even if nothing imports it
+    assert codeversion.cached_version(root, cache) == second and len(computed) == 4
+    cache.write_text("{not json")                                 # a damaged cache: computed again, rewritten
+    assert codeversion.cached_version(root, cache) == second and len(computed) == 5
+    assert codeversion.cached_version(root, cache) == second and len(computed) == 5
+    unwritable = tmp_path / "file"
+    unwritable.write_text("")
+    assert codeversion.cached_version(root, unwritable / "code_version.json") == second     # no cache: computed
+
+
 def test_an_arrays_h5_cut_by_a_killed_run_is_written_anew(tmp_path, caplog):
     from bench.harness.store import write_arrays
 

@@ -138,3 +138,102 @@ def test_a_kept_mesh_is_read_back_as_parsed(synth_root, tmp_path, monkeypatch):
     first, again = rows
     for column in ("C_g_cm", "C_s_cm", "P_cm", "P_e_cm", "valid_px"):
         assert first[column] == again[column], column
+
+
+@pytest.mark.parametrize("experiment", ["table2", "table3", "beyond", "runtime"])
+def test_no_experiment_sets_hydra_mode_so_a_multirun_may_skip_hydras_mode_probe(experiment):
+    """bench.__main__.skip_mode_probe: with -m Hydra runs a multirun whatever the probe finds, unless a config said
+    RUN (then it only warns): skipping the probe's composition changes nothing while no config sets the mode."""
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose(config_name="config", overrides=[f"experiment={experiment}"], return_hydra_config=True)
+    assert cfg.hydra.mode is None
+
+
+def _job_rows(root, rows_text):
+    (root / "0_job").mkdir(parents=True)
+    (root / "0_job" / "results.csv").write_text(rows_text)
+
+
+def test_the_merge_worker_merges_what_it_is_handed_and_relays_a_user_error(tmp_path, capfd):
+    from bench.report import merge
+
+    header = ("object,distance,frame,method,freq,prior,f_GHz,C_g_cm,C_s_cm,P_cm,P_e_cm,valid_px,runtime_ms,device,"
+              "timing,label,grid,params,metrics,failure\n")
+    row = "01_plate,30,0,mm2fsk,d10,none,80.0 82.0,0.1,0.2,0.3,0.3,100,50.0,cpu,alone,MM-2FSK,from_capture,,sound,"
+    _job_rows(tmp_path / "sweep", f"{header}{row}\n")
+    merge.finish_worker(merge.start_worker(), tmp_path / "sweep", None, False)
+    merged = (tmp_path / "sweep" / "results.csv").read_text()
+    assert merged.splitlines()[0].startswith("object,distance,frame,method,freq,prior") and "01_plate" in merged
+    _job_rows(tmp_path / "cut", header + row[:20])                 # a row cut by a killed job
+    with pytest.raises(SystemExit) as exited:
+        merge.finish_worker(merge.start_worker(), tmp_path / "cut", None, False)
+    assert exited.value.code == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "cut mid-row" in err[0]
+    assert merge.start_worker().hand_over(None) == 0     # a multirun that ends without a merge: it just exits
+
+
+def test_the_merge_worker_starts_after_the_first_job_and_only_in_the_sweeps_process(monkeypatch):
+    from bench.report import merge
+
+    started = []
+    monkeypatch.setattr(merge, "start_worker", lambda: started.append(1) or "worker")
+    callback = merge.MergeResults()
+    callback.on_job_end(None, None)                      # no multirun started here (a joblib or SLURM job's copy)
+    assert started == []
+    callback.on_multirun_start(None)
+    assert started == []                                 # not while the jobs are composed
+    callback.on_job_end(None, None)
+    callback.on_job_end(None, None)
+    assert started == [1] and callback._worker == "worker"
+    remote = merge.MergeResults()
+    remote.on_multirun_start(None)
+    remote._sweep_pid += 1                                # the callback as copied into another process
+    remote.on_job_end(None, None)
+    assert started == [1]
+
+
+class _FailingLoader(_Loader):
+    def load_sweep_config(self, master_config, sweep_overrides):
+        if "freq=typo" in sweep_overrides:
+            raise ValueError("no freq 'typo'")
+        return super().load_sweep_config(master_config, sweep_overrides)
+
+
+def test_a_batch_is_composed_by_forked_workers_and_a_failure_is_composed_again_here(monkeypatch):
+    from hydra_plugins.mm2fsk_bench import sweeper
+
+    monkeypatch.setattr(sweeper, "_cores", lambda: 4)
+    loader = _Loader()
+    once = sweeper._ComposedOnce(loader)
+    batch = [["freq=d05"], ["freq=d1"], ["freq=d2"], ["freq=d4"]]
+    once.keep_all({}, batch)
+    assert loader.calls == []                                            # composed in the workers
+    assert [once.load_sweep_config({}, o)["composed"] for o in batch] == [tuple(o) for o in batch]
+    failing = _FailingLoader()
+    once = sweeper._ComposedOnce(failing)
+    with pytest.raises(ValueError, match="typo"):                        # here, as Hydra would report it
+        once.keep_all({}, [["freq=d05"], ["freq=typo"]])
+    assert failing.calls == [("freq=d05",)]
+
+
+def test_configurations_composed_by_the_workers_equal_those_composed_here():
+    from hydra._internal.hydra import Hydra
+    from hydra._internal.utils import create_config_search_path
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    from hydra_plugins.mm2fsk_bench import sweeper
+
+    try:                        # Hydra's global state, as `python -m bench` sets it up: cleared for the next tests
+        loader = Hydra.create_main_hydra2(task_name="app", config_search_path=create_config_search_path(
+            str(CONFIG_DIR))).config_loader
+        master = loader.load_configuration("config", ["experiment=table3", "dataset=maroon", "dataset.root=/x"],
+                                           RunMode.MULTIRUN)
+        batch = [["cell=bp_d05"], ["cell=mm2fsk_d10"], ["cell=prior_only_d10"]]
+        forked = sweeper._compose_in_workers(loader, master, batch, 2)
+        here = [loader.load_sweep_config(master, o) for o in batch]
+    finally:
+        GlobalHydra.instance().clear()
+    assert forked is not None and [OmegaConf.to_yaml(c) for c in forked] == [OmegaConf.to_yaml(c) for c in here]

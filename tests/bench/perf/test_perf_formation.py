@@ -24,3 +24,14 @@ def test_scene_frames_differ_and_hold_the_scene():
     rng = np.random.default_rng()
     a, b = (formation.scene_frame(ant, formation.D05_HZ, rng, n_points=20) for _ in range(2))
     assert a.shape == (94, 94, 2) and a.dtype == np.complex64 and not np.allclose(a, b)
+
+
+def test_range_rows_time_both_tables_and_the_new_one_meets_the_issue():
+    from methods.backends import backend_for
+
+    rows = formation.range_rows(backend_for("cpu"), load_antenna_array(), 6, 8, 1, np.random.default_rng())
+    new, old = rows
+    assert new["impl"].endswith("(new)") and old["impl"].endswith("(old)")
+    assert new["frame_median_ms"] > 0 and new["cpu_median_ms"] > 0 and "load_1min" in new
+    assert new["rel_l2_vs_f64_256_f0"] <= 1e-4 and new["max_mag_diff_f1"] <= 1e-4
+    assert old["rel_l2_vs_f64_256_f0"] > 2 * new["rel_l2_vs_f64_256_f0"]       # the earlier table, 4e-4
