@@ -110,7 +110,7 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False, kee
     docs/measurements/formation.md). There two-frequency BP searches its depths on a dense coarse volume
     (`bp_dense_z_search`; H100, paper grid, masked objects, new frames: 9.6 (p90 10.3) against 37 ms, >= 99.995 %
     of the depths valid in both within 0.1 mm, the same valid pixels; an 8 mm step, 8.6 ms, moved 0.15 % of the
-    steps capture's depths on Warp-CPU; 6 mm kept them; docs/measurements/formation.md section 4)."""
+    steps capture's depths on Warp-CPU; 6 mm kept them; docs/measurements/formation.md section 5)."""
     if method == "bp":
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True, bp_dense_z_search=n_freqs == 2)

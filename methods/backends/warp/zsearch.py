@@ -6,7 +6,7 @@ maximum can pass the filter, compacted); `volume_peak_depth`'s argmax and parabo
 frequencies beat over c / (2 df)); the window samples are the dense volume's own values (same kernel, same point),
 so the depth is the dense one wherever its largest peak is among the candidates (speckle makes near-equal peaks:
 hence several). Cost: n_z / step samples a pixel plus n_cand (2 step + 1) at the refined ones instead of n_z
-(H100, paper grid, 6 mm and 3 candidates: 9.6-10.4 against 37 ms; docs/measurements/formation.md section 4)."""
+(H100, paper grid, 6 mm and 3 candidates: 9.6-10.4 against 37 ms; docs/measurements/formation.md section 5)."""
 from __future__ import annotations
 
 from contextlib import nullcontext
