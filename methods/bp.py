@@ -38,11 +38,23 @@ from methods.skips.settings import NONE, SkipSettings
 DEFAULT_BAND_M = 0.05
 
 
-def _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, backend: Backend, timer):
+def _z_search(backend: Backend, skips: SkipSettings, dz_m: float, threshold_db: float | None) -> dict:
+    """`volume_peak`'s depth-search arguments where `bp_dense_z_search` is on and the backend takes it; with a
+    threshold (None: no pixel is skipped; pass it only where the volume's box is the filtered region) pixels whose
+    coarse maximum lies `dense_z_margin_db` below it are not refined."""
+    if not (skips.bp_dense_z_search and backend.searches_volume_z):
+        return {}
+    keep_ratio = 0.0 if threshold_db is None else 10.0 ** (-(threshold_db + skips.dense_z_margin_db) / 20.0)
+    return {"z_step": max(1, int(round(skips.dense_z_step_m / dz_m))), "z_candidates": skips.dense_z_candidates,
+            "z_keep_ratio": keep_ratio}
+
+
+def _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, backend: Backend, timer, skips: SkipSettings,
+                    threshold_db):
     """Depth and max projection (ny, nx) from the rectangular volume x_m x y_m (descending) x z_m (on a Warp backend
     the volume stays there; only the (ny, nx) maps come back)."""
     return backend.volume_peak(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m, grid.y_m[::-1], z_m, dz_m,
-                               timer=timer)
+                               timer=timer, **_z_search(backend, skips, dz_m, threshold_db))
 
 
 def _band_depth_m(signal, freqs_hz, antennas, grid, prior_m, band_m, dz_m, backend, timer, pixels=None):
@@ -165,15 +177,18 @@ def _box_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, pixels, z_edges, b
     return int((r1 - r0) * (c1 - c0) * len(z_m))
 
 
-def _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi: Roi, backend, timer, extra: dict):
+def _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi: Roi, backend, timer, extra: dict,
+                      skips: SkipSettings, threshold_db):
     """Warp devices: the rectangular volume over the ROI's bounding box (rows, columns, z_m), NaN outside the ROI."""
     rows, cols = np.nonzero(roi.pixels)
     depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
     if len(rows) and len(z_m):
         r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
-        box_depth, box_proj = backend.volume_peak(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m[c0:c1],
-                                                  grid.y_m[::-1][r0:r1], z_m, dz_m, timer=timer)
         inside = roi.pixels[r0:r1, c0:c1]
+        box_depth, box_proj = backend.volume_peak(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid.x_m[c0:c1],
+                                                  grid.y_m[::-1][r0:r1], z_m, dz_m, timer=timer,
+                                                  **_z_search(backend, skips, dz_m,
+                                                              threshold_db if inside.all() else None))
         depth_m[r0:r1, c0:c1] = np.where(inside, box_depth, np.nan)
         max_proj[r0:r1, c0:c1] = np.where(inside, box_proj, np.nan)
         extra.update(evaluated_voxels=int((r1 - r0) * (c1 - c0) * len(z_m)))
@@ -221,9 +236,10 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
                                                   threshold_db, backend, timer, extra)
         elif roi_cuts:
             depth_m, max_proj = _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi, backend, timer,
-                                                  extra)
+                                                  extra, skips, threshold_db)
         else:
-            depth_m, max_proj = _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, backend, timer)
+            depth_m, max_proj = _volume_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, backend, timer, skips,
+                                                threshold_db)
             extra.update(roi_px=roi.n_pixels, evaluated_voxels=roi.n_pixels * len(z_m), roi_sources=roi.sources)
     with timer.stage("filter"):
         depth_m = filter_depth(depth_m, max_proj, threshold_db)

@@ -52,6 +52,8 @@ class Backend:
     host_range_search = False
     #: BP over a region of interest computes the rectangular volume of its bounding box (else the point search)
     prefers_box_volume = False
+    #: `volume_peak` takes `z_step` (a coarse volume and a window around each pixel's maximum: `bp_dense_z_search`)
+    searches_volume_z = False
     #: dense kernels beat the host-driven searches for few frequencies (the `roi=auto` defaults, methods.skips.settings)
     dense_beats_search = False
     #: 2FSK and 3FSK run their passes where the data lives (`fsk_two_pass`, `fsk_three`): one copy back

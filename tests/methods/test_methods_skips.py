@@ -112,11 +112,12 @@ def test_roi_settings():
         resolve("most")
     assert ALL.only("fsk_keep") == dataclasses.replace(NONE, fsk_keep=True)
     # Warp devices: the dense kernels beat the host-driven searches for few frequencies (docs/measurements/gpu.md)
-    assert resolve("auto", "bp", 2, True) == SkipSettings(mask_bb=True) == default_for("2fsk", 2, True)
+    assert resolve("auto", "bp", 3, True) == SkipSettings(mask_bb=True) == default_for("2fsk", 2, True)
+    assert resolve("auto", "bp", 2, True) == SkipSettings(mask_bb=True, bp_dense_z_search=True)
     assert default_for("bp", 128, True).bp_coarse_to_fine and default_for("2fsk", 2, False).fsk_keep
     # ... but where the backend keeps inside its device graph (Warp on CUDA), fsk_keep pays there too
     assert resolve("auto", "3fsk", 3, True, True) == SkipSettings(mask_bb=True, fsk_keep=True)
-    assert resolve("auto", "bp", 2, True, True) == SkipSettings(mask_bb=True)
+    assert resolve("auto", "bp", 2, True, True) == SkipSettings(mask_bb=True, bp_dense_z_search=True)
     assert SkipSettings().lattice_px(0.001) == (3, 5) and SkipSettings().lattice_px(0.006)[0] == 1   # no lattice
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import warp as wp
 
 from methods.backends.base import Backend, check_inputs, grid_vectors
-from methods.backends.warp import columns, correlation, fsk, prior, search
+from methods.backends.warp import columns, correlation, fsk, prior, search, zsearch
 from methods.backends.warp.frame_graph import frame_graph, fsk_graph
 from methods.backends.warp.frames import BufferPool, FrameCache
 from methods.backends.warp.prior import DeferredPrior
@@ -24,6 +24,7 @@ class WarpBackend(Backend):
     tests' reference for the kernels without a GPU)."""
 
     prefers_box_volume = True
+    searches_volume_z = True
     dense_beats_search = True
     device_fsk = True
 
@@ -45,6 +46,7 @@ class WarpBackend(Backend):
         self.search_profiles = search.FrameProfiles()
         #: per-term interpolation bound of the "columns" volume kernel (its accuracy knob: the rho step follows)
         self.column_term_tol = columns.TERM_TOL
+        self.last_window_edges = None
 
     def make_launch(self, signal, freqs_hz, tx_m, rx_m, *, kernel: str | None = None, points_m=None, grid_m=None,
                     sum_freqs: bool = False, reuse: bool = False):
@@ -130,13 +132,24 @@ class WarpBackend(Backend):
         return correlation.to_complex(run())[0].reshape(len(z_m), len(y_m), len(x_m))
 
     def volume_peak(self, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m: float, timer=None,
-                    method: str = "auto"):
-        """As `Backend.volume_peak`; `method` as in `volume` ("columns": the accurate column-separable sum)."""
+                    method: str = "auto", z_step: int = 1, z_candidates: int = 3, z_keep_ratio: float = 0.0):
+        """As `Backend.volume_peak`; `method` as in `volume` ("columns": the accurate column-separable sum);
+        `z_step` > 1: the coarse volume at every z_step-th depth and a window of +-z_step depths around each pixel's
+        `z_candidates` largest coarse local maxima, only at pixels whose coarse maximum reaches `z_keep_ratio` times
+        the image's (`zsearch`; the dense volume where z_m is shorter than
+        4 z_step or the kernel takes no points). `self.last_window_edges`: that search's pixels whose maximum lay
+        on an inner window edge (None after a dense volume)."""
         signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         x_m, y_m, z_m = grid_vectors(x_m, y_m, z_m)
+        kernel = self._volume_kernel(freqs_hz, method)
+        self.last_window_edges = None
+        if z_step > 1 and len(z_m) >= 4 * z_step and kernel in ("tc", "separable", "direct"):
+            depth_m, proj, self.last_window_edges = zsearch.volume_peak(
+                self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m, z_step, z_candidates,
+                z_keep_ratio, kernel=kernel, timer=timer)
+            return depth_m, proj
         return correlation.volume_peak(self.frames, self.buffers, signal, freqs_hz, tx_m, rx_m, x_m, y_m, z_m, dz_m,
-                                       kernel=self._volume_kernel(freqs_hz, method), timer=timer,
-                                       term_tol=self.column_term_tol)
+                                       kernel=kernel, timer=timer, term_tol=self.column_term_tol)
 
     def realsense_prior(self, depth, realsense2radar, grid, keep_on_device: bool = False,
                         fill: str = DEFAULT_FILL) -> Prior:

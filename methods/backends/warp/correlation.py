@@ -61,7 +61,7 @@ def _range_launch(inputs: FrameInputs, freqs_hz, flag, points, x, y, z, out, box
 
 def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m, rx_m, *, kernel: str,
                 points_m=None, grid_m=None, sum_freqs: bool = False, reuse: bool = False,
-                inputs: FrameInputs | None = None, term_tol: float = columns.TERM_TOL):
+                inputs: FrameInputs | None = None, term_tol: float = columns.TERM_TOL, count: wp.array | None = None):
     """Upload inputs once; return a function that runs `kernel` and returns the device output (rows, N) vec2f.
 
     kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct", "range" (frequency sum only; the
@@ -73,6 +73,8 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
     Frame inputs are cached by content; with `reuse` the output and work buffers are pre-allocated ones shared
     between calls (the API copies the output back before returning). The benchmark times the returned function.
     `inputs`: the frame's FrameInputs when the caller already holds them (no cache lookup: a search on one frame).
+    `count`: (1,) int32 on the device, the points that count (the tensor-core blocks past it return at once on
+    CUDA; their outputs are left unwritten); None = all.
     """
     inputs = inputs or frames.inputs(signal, freqs_hz, tx_m, rx_m)
     dev = inputs.device
@@ -116,7 +118,8 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
         prep_args = [flag, points, x, y, z, inputs.cycles, pts, common]
         if not wp.get_device(dev).is_cpu:    # (tx halves need real blocks: Warp-CPU runs block_dim 1: rx product)
             tc_kernel, n_tile = kernels.correlate_tiles_tx_halves, int(kernels.TC2_POINTS)
-            every = buffers.constant("count.all", lambda: wp.array([2**31 - 1], dtype=wp.int32, device=dev))
+            every = count if count is not None else buffers.constant(
+                "count.all", lambda: wp.array([2**31 - 1], dtype=wp.int32, device=dev))
             tc_args = [pts, rx4, tx4, inputs.k, gain, inputs.tx_half_tables(), common, int(sum_freqs), out, every]
         else:
             tc_kernel, n_tile = kernels.correlate_tiles_rx_product, int(kernels.TC_POINTS)
