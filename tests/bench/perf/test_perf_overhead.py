@@ -18,7 +18,7 @@ def test_later_cells_reuse_the_read_captures_and_ground_truth(synth_root, tmp_pa
     for row in (first, second):
         assert row["method_s"] >= row["method_warm_s"] > 0 and row["store_key_s"] > 0 and row["outputs_s"] > 0
         assert abs(sum(row[f"{s}_s"] for s in STAGES) + row["other_s"] - row["wall_s"]) < 1e-9
-        assert 0 <= row["other_s"] < 0.5 * row["wall_s"]
+        assert row["other_s"] >= 0          # a share of the wall time would be a timing assertion: load decides it
     assert total["cell"] == "total" and total["frames"] == 2
 
 
