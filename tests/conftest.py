@@ -22,15 +22,20 @@ import pytest
 from no_slurm import path_without_slurm
 
 _SHADOW_PATH = Path(tempfile.mkdtemp(prefix="bench-no-slurm-"))
+_CACHE_HOME = Path(tempfile.mkdtemp(prefix="bench-cache-"))
 
 
 def pytest_configure(config):
+    # the code version's cache (bench.harness.codeversion) in a folder of this session, never the user's ~/.cache;
+    # subprocesses inherit it
+    os.environ["XDG_CACHE_HOME"] = str(_CACHE_HOME)
     if os.environ.get("BENCH_SLURM_TRY") != "1":
         os.environ["PATH"] = path_without_slurm(os.environ.get("PATH", ""), _SHADOW_PATH)
 
 
 def pytest_unconfigure(config):
     shutil.rmtree(_SHADOW_PATH, ignore_errors=True)
+    shutil.rmtree(_CACHE_HOME, ignore_errors=True)
 
 SYNTH_FIXTURE_CAPTURES = (("01_plate", 30), ("03_sphere", 30))
 

@@ -10,9 +10,9 @@ the tests) do not count. A method outside these packages enters the cell's key b
 (bench.harness.app._method_source).
 
 Following the graph parses ~110 sources (0.25 s on a quiet 2-core machine, in every process of a sweep), so the
-version is kept in a small cache file (`CACHE_FILE`) under a key that digests every source file of the packages
-(their paths and bytes: whatever the graph could reach or newly reach): any edit, new or removed file gives a new key
-and the graph is followed again. A cache that cannot be read or written is skipped.
+version is kept in a small cache file (`default_cache_file()`) under a key that digests every source file of the
+packages (their paths and bytes: whatever the graph could reach or newly reach): any edit, new or removed file gives
+a new key and the graph is followed again. A cache that cannot be read or written is skipped.
 """
 from __future__ import annotations
 
@@ -28,7 +28,6 @@ from pathlib import Path
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("bench", "methods", "metrics")
 COMPUTE_ENTRY = "bench.harness.app"
-CACHE_FILE = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "mm2fsk-bench" / "code_version.json"
 CACHE_ENTRIES = 16       # versions of the tree kept (branches switched back and forth)
 _MODULE_NAME = re.compile(rf"(?:{'|'.join(PACKAGES)})(?:\.\w+)+")
 
@@ -98,8 +97,24 @@ def sources_key(root: Path = PACKAGE_ROOT) -> str:
     return digest.hexdigest()
 
 
-def cached_version(root: Path = PACKAGE_ROOT, cache_file: Path = CACHE_FILE) -> str:
-    """`_compute_version`, read from `cache_file` when it holds this tree's `sources_key`, else computed and kept."""
+def default_cache_file() -> Path | None:
+    """The cache's file: $XDG_CACHE_HOME (when absolute) or ~/.cache, then mm2fsk-bench/code_version.json; None
+    where neither is known (no HOME and no passwd entry, as in some containers): then nothing is cached."""
+    base = os.environ.get("XDG_CACHE_HOME", "")
+    if not os.path.isabs(base):
+        try:
+            base = Path.home() / ".cache"
+        except RuntimeError:
+            return None
+    return Path(base) / "mm2fsk-bench" / "code_version.json"
+
+
+def cached_version(root: Path = PACKAGE_ROOT, cache_file: Path | None = None) -> str:
+    """`_compute_version`, read from `cache_file` (default: `default_cache_file()`) when it holds this tree's
+    `sources_key`, else computed and kept."""
+    cache_file = cache_file or default_cache_file()
+    if cache_file is None:
+        return _compute_version(root)
     key = sources_key(root)
     try:
         kept = json.loads(cache_file.read_text())

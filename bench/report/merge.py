@@ -19,7 +19,9 @@ import csv
 import io
 import json
 import os
+import signal
 import sys
+import threading
 import traceback
 from pathlib import Path
 
@@ -111,7 +113,12 @@ class Worker:
 
     def __init__(self):
         read_fd, self._write_fd = os.pipe()
-        self.pid = os.fork()
+        try:
+            self.pid = os.fork()
+        except OSError:                      # no memory or process slots: the caller merges in this process
+            os.close(read_fd)
+            os.close(self._write_fd)
+            raise
         if self.pid == 0:                    # the worker
             os.close(self._write_fd)
             code = 1
@@ -152,7 +159,7 @@ def _warm_up() -> None:
 def _serve(read_fd: int) -> int:
     """The worker's side: the merge's imports, then the request from the pipe."""
     devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, sys.stdout.fileno())    # its stdout is the sweep's: the merge itself prints nothing
+    os.dup2(devnull, 1)                      # its stdout is the sweep's: the merge itself prints nothing
     _warm_up()
     with os.fdopen(read_fd, "rb") as pipe:
         request = pipe.read()
@@ -171,16 +178,27 @@ def _serve(read_fd: int) -> int:
 
 
 def start_worker() -> Worker | None:
-    """The merge's worker, or None where processes cannot fork (the merge then runs in this process)."""
-    return Worker() if hasattr(os, "fork") else None
+    """The merge's worker, or None where processes cannot fork or the fork fails (the merge then runs in this
+    process)."""
+    if not hasattr(os, "fork"):
+        return None
+    try:
+        return Worker()
+    except OSError:
+        return None
 
 
 def finish_worker(worker: Worker, root: Path, table: str | None, depth_errors: bool) -> None:
     """Hand the sweep to the worker and wait: its exit code 2 (one `error:` line of its own on stderr) ends this
     process with 2 too; any other failure is raised."""
-    code = worker.hand_over({"root": str(root), "table": table, "depth_errors": depth_errors})
+    # resolved here: the worker was forked inside a job, whose working directory Hydra may have changed
+    code = worker.hand_over({"root": str(root.resolve()), "table": table, "depth_errors": depth_errors})
     if code == cli.EXIT_USER_ERROR:
         sys.exit(code)
+    if code == cli.EXIT_INTERRUPTED:
+        raise KeyboardInterrupt
+    if code < 0:
+        raise RuntimeError(f"the merge of {root} was killed by signal {signal.Signals(-code).name}")
     if code != 0:
         raise RuntimeError(f"the merge of {root} failed (exit code {code}; its error above)")
 
@@ -198,8 +216,14 @@ class MergeResults(Callback):
     def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
         self._sweep_pid = os.getpid()
 
+    def __getstate__(self) -> dict:
+        """Copies sent to other processes (joblib, SLURM) never fork a worker: they carry no sweep process id."""
+        return {"_worker": None, "_sweep_pid": None}
+
     def on_job_end(self, config: DictConfig, job_return, **kwargs) -> None:
-        if self._worker is None and self._sweep_pid == os.getpid():
+        # only the sweep's own process, from its main thread (a threading launcher's jobs must not fork mid-job)
+        if (self._worker is None and self._sweep_pid == os.getpid()
+                and threading.current_thread() is threading.main_thread()):
             self._worker = start_worker()
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:

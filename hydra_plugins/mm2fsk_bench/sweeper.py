@@ -17,6 +17,7 @@ import multiprocessing
 import os
 import pickle
 from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
 
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.types import HydraContext
@@ -88,7 +89,9 @@ def _compose_in_workers(loader, master_config: DictConfig, batch: list[list[str]
     global _work
     _work = (loader, master_config, batch)
     try:
-        with multiprocessing.get_context("fork").Pool(workers) as pool:
+        # an executor, not a Pool: a worker killed mid-task (memory, a signal) raises BrokenProcessPool here,
+        # where Pool.map would wait for the lost task for ever
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
             return [pickle.loads(blob) for blob in pool.map(_compose_one, range(len(batch)))]
     except Exception:  # noqa: BLE001 -- composed again here, where Hydra reports its own errors
         return None

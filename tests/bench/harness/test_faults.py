@@ -471,6 +471,24 @@ def test_the_cached_code_version_is_the_computed_one_and_any_source_edit_compute
     assert codeversion.cached_version(root, unwritable / "code_version.json") == second     # no cache: computed
 
 
+def test_the_code_versions_cache_file_without_a_home_or_with_a_relative_cache_home(monkeypatch, tmp_path):
+    from pathlib import Path
+
+    from bench.harness import codeversion
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert codeversion.default_cache_file() == tmp_path / "mm2fsk-bench" / "code_version.json"
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/cache")               # ignored: it would follow the cwd
+    monkeypatch.setattr(Path, "home", classmethod(lambda cls: tmp_path / "home"))
+    assert codeversion.default_cache_file() == tmp_path / "home" / ".cache" / "mm2fsk-bench" / "code_version.json"
+
+    def no_home(cls):
+        raise RuntimeError("Could not determine home directory.")
+    monkeypatch.setattr(Path, "home", classmethod(no_home))
+    assert codeversion.default_cache_file() is None                    # a container without HOME: no cache
+    assert codeversion.cached_version() == codeversion._compute_version(codeversion.PACKAGE_ROOT)
+
+
 def test_an_arrays_h5_cut_by_a_killed_run_is_written_anew(tmp_path, caplog):
     from bench.harness.store import write_arrays
 

@@ -2,6 +2,7 @@
 content in the store and read back bit for bit, outputs written on a background thread, the stage clock."""
 from __future__ import annotations
 
+import os
 import pickle
 
 import numpy as np
@@ -191,6 +192,31 @@ def test_the_merge_worker_starts_after_the_first_job_and_only_in_the_sweeps_proc
     remote._sweep_pid += 1                                # the callback as copied into another process
     remote.on_job_end(None, None)
     assert started == [1]
+
+
+def test_a_pickled_copy_or_another_thread_never_forks_and_a_failed_fork_merges_here(monkeypatch):
+    import threading
+
+    from bench.report import merge
+
+    started = []
+    monkeypatch.setattr(merge, "start_worker", lambda: started.append(1) or "worker")
+    callback = merge.MergeResults()
+    callback.on_multirun_start(None)
+    copy = pickle.loads(pickle.dumps(callback))          # what joblib and SLURM send to their workers
+    copy.on_job_end(None, None)
+    thread = threading.Thread(target=callback.on_job_end, args=(None, None))   # a threading launcher's job
+    thread.start()
+    thread.join()
+    assert started == [] and callback._worker is None
+    monkeypatch.undo()
+
+    def no_fork():
+        raise OSError(12, "Cannot allocate memory")
+    monkeypatch.setattr(merge.os, "fork", no_fork)
+    descriptors = set(os.listdir("/proc/self/fd"))
+    assert merge.start_worker() is None                   # the merge then runs in this process
+    assert set(os.listdir("/proc/self/fd")) == descriptors   # the pipe's two ends closed
 
 
 class _FailingLoader(_Loader):
