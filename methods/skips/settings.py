@@ -107,10 +107,10 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False, kee
     docs/measurements/gpu.md). Where the backend runs `fsk_keep` inside its device graph (`keeps_on_device`: Warp on
     CUDA) it pays and is on, as on the CPU (H100, catalogue at 30 cm: 2FSK d05 0.80-0.88 against 0.88-0.94 ms, 3FSK
     1.09-1.22 against 1.27-1.31 ms, 100 % of depths within 0.1 mm, 2 of 11 806 pixels lost once;
-    docs/measurements/formation.md). There two-frequency BP searches its depths on a dense coarse volume
-    (`bp_dense_z_search`; H100, paper grid, masked objects, new frames: 9.6 (p90 10.3) against 37 ms, >= 99.995 %
-    of the depths valid in both within 0.1 mm, the same valid pixels; an 8 mm step, 8.6 ms, moved 0.15 % of the
-    steps capture's depths on Warp-CPU; 6 mm kept them; docs/measurements/formation.md section 5)."""
+    docs/measurements/formation.md). On every Warp backend (CPU and CUDA) two-frequency BP searches its depths on
+    a dense coarse volume (`bp_dense_z_search`: about 4x faster on the H100 with >= 99.995 % of the depths within
+    0.1 mm of the dense volume's; runtime against error in docs/measurements/formation.md section 5). The table
+    per backend: docs/measurements/skips.md "Defaults"."""
     if method == "bp":
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True, bp_dense_z_search=n_freqs == 2)

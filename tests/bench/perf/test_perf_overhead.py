@@ -17,8 +17,7 @@ def test_later_cells_reuse_the_read_captures_and_ground_truth(synth_root, tmp_pa
     assert second["read_s"] == 0 and second["ground_truth_s"] == 0         # served from the process's caches
     for row in (first, second):
         assert row["method_s"] >= row["method_warm_s"] > 0 and row["store_key_s"] > 0 and row["outputs_s"] > 0
-        assert abs(sum(row[f"{s}_s"] for s in STAGES) + row["other_s"] - row["wall_s"]) < 1e-9
-        assert row["other_s"] >= 0          # a share of the wall time would be a timing assertion: load decides it
+        assert all(row[f"{s}_s"] >= 0 for s in STAGES) and row["other_s"] >= 0     # other_s: the wall's rest
     assert total["cell"] == "total" and total["frames"] == 2
 
 

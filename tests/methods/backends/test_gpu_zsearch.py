@@ -44,7 +44,7 @@ def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
     x_m, y_m = np.linspace(-0.06, 0.06, 7), np.linspace(0.06, -0.06, 7)
     z_m = np.linspace(0.25, 0.35, 101)             # 1 mm, as the paper grid
     dz_m = z_m[1] - z_m[0]
-    step = int(rng.integers(2, 9))                 # coarse steps of 2-8 mm (the default: 8 mm, 3 candidates)
+    step = int(rng.integers(2, 9))                 # coarse steps of 2-8 mm (the default: 6 mm, 3 candidates)
     got_depth, got_proj = backend.volume_peak(signal.astype(np.complex64), FREQS_HZ, ANT.tx_m, ANT.rx_m, x_m, y_m,
                                               z_m, dz_m, z_step=step)
     edges = backend.last_window_edges
