@@ -88,7 +88,6 @@ def test_device_coarse_roi_equals_the_host_one(device):
     """bp_search.coarse_roi with the device's coarse pass (Backend.coarse_peaks) finds the host pass's ROI."""
     backend = _searching(device)
     rng = np.random.default_rng()
-    signal = _scene_frame(rng)
     xx, yy = np.meshgrid(np.linspace(-0.06, 0.06, 13), np.linspace(0.06, -0.06, 11))
     pixels = np.ones(xx.shape, dtype=bool)
     z_m = np.arange(0.24, 0.38, 0.0025)
@@ -96,11 +95,19 @@ def test_device_coarse_roi_equals_the_host_one(device):
     def plan_of(x_m, y_m):
         return bp_search.plan_search(FREQS_HZ, ANT, x_m, y_m, float(z_m[0]), 0.0025, 3.0, 0.02, 1.0)
 
+    # fresh random scenes until the host's ROI cuts the depth range (most do; one that spans it all would make the
+    # comparison below vacuous): the check is that the device finds the same ROI, not that every scene is cut
+    for _ in range(20):
+        signal = _scene_frame(rng)
+        evaluate = backend.summed_at_points(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m)
+        host, n_host = bp_search.coarse_roi(evaluate, pixels, xx, yy, z_m, plan_of, 14.0, 3, 2, 3.0, 0.005)
+        if host.pixels.sum() > 0 and host.z_max_m - host.z_min_m < z_m[-1] - z_m[0]:
+            break
+    else:
+        pytest.fail("20 random scenes gave no ROI that cuts the depth range")
+
     def on_device(x_m, y_m, z_c, step):
         return backend.coarse_peaks(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m, x_m, y_m, z_c, step)
-    evaluate = backend.summed_at_points(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m)
-    host, n_host = bp_search.coarse_roi(evaluate, pixels, xx, yy, z_m, plan_of, 14.0, 3, 2, 3.0, 0.005)
     got, n_got = bp_search.coarse_roi(evaluate, pixels, xx, yy, z_m, plan_of, 14.0, 3, 2, 3.0, 0.005, on_device)
     assert n_got == n_host and np.array_equal(got.pixels, host.pixels)
     assert got.z_min_m == host.z_min_m and got.z_max_m == host.z_max_m
-    assert host.pixels.sum() > 0 and host.z_max_m - host.z_min_m < z_m[-1] - z_m[0]     # it did cut
