@@ -21,10 +21,10 @@ numbers).
 (methods.backends.cpu_range)
   instead of summing every frequency.
 * `bp_dense_z_search`: BP on a backend that computes dense volumes (Warp) evaluates every pixel at every
-  `dense_z_step_m` of depth first, then a window of +-1 coarse step around each of its `dense_z_candidates`
-  largest coarse local maxima at the full depth step (methods.backends.warp.zsearch), only at pixels whose
-  coarse maximum is within the filter's threshold + `dense_z_margin_db` of the image's (the others cannot pass
-  the filter); the depth is the dense volume's wherever its maximum lies in one of those windows.
+  `dense_z_step_m` of depth first, then a window of +-(one coarse step + one sample) around each of its
+  `dense_z_candidates` largest coarse local maxima at the full depth step (methods.backends.warp.zsearch), only at
+  pixels whose coarse maximum is within the filter's threshold + `dense_z_margin_db` of the image's (the others
+  cannot pass the filter); the depth is the dense volume's wherever its maximum lies in one of those windows.
 * `fsk_keep`: 2FSK's second pass and 3FSK's second and fine passes run only at pixels the filter can keep,
   predicted on a pixel lattice (methods.skips.keep_skip).
 `NONE` (`roi=none`) turns every skip off: the computation of today, bit for bit.

@@ -1,11 +1,11 @@
 """BP's depth search on a dense coarse volume (the skip `bp_dense_z_search`, methods.skips.settings): the volume at
 every `step`-th depth (and the last) with the volume kernel; per pixel its `n_cand` largest coarse local maxima and
-around each a window of 2 step + 1 depths, evaluated as points by the same kernel (only at pixels whose coarse
+around each a window of 2 step + 3 depths, evaluated as points by the same kernel (only at pixels whose coarse
 maximum can pass the filter, compacted); `volume_peak_depth`'s argmax and parabola over the windows
 (`zsearch_kernels`). The two-frequency BP magnitude varies slowly along z (depth of focus ~ lambda (R/D)^2, the two
 frequencies beat over c / (2 df)); the window samples are the dense volume's own values (same kernel, same point),
 so the depth is the dense one wherever its largest peak is among the candidates (speckle makes near-equal peaks:
-hence several). Cost: n_z / step samples a pixel plus n_cand (2 step + 1) at the refined ones instead of n_z
+hence several). Cost: n_z / step samples a pixel plus n_cand (2 step + 3) at the refined ones instead of n_z
 (H100, paper grid, 6 mm and 3 candidates: 9.6-10.4 against 37 ms; docs/measurements/formation.md section 5)."""
 from __future__ import annotations
 
@@ -47,7 +47,11 @@ def volume_peak(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
     volume may differ). `timer` gets the stages "correlate" and "depth"."""
     stage = timer.stage if timer is not None else (lambda name: nullcontext())
     n_z, n_px = len(z_m), len(x_m) * len(y_m)
-    n_w = 2 * step + 1                 # (the caller keeps n_z >= 4 step)
+    # a window of +-(step + 1): a maximum within one coarse step of the coarse peak keeps both of the parabola's
+    # neighbours inside it (at +-step it could sit on the edge, where the clipped neighbour biased the depth by half
+    # a depth step); the caller keeps n_z >= 4 step
+    half = step + 1
+    n_w = 2 * half + 1
     with stage("correlate"):
         inputs = frames.inputs(signal, freqs_hz, tx_m, rx_m)
         dev = wp.get_device(inputs.device)
@@ -69,7 +73,7 @@ def volume_peak(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
         points = buffers.get("zs.points", n_px * n_cand * n_w, wp.vec3d)
         maps = buffers.get("peak", (2, n_px), wp.float64)
         wp.launch(zsearch_kernels.window_points, dim=n_px,
-                  inputs=[coarse, *grid, step, n_cand, pixel_max, image_max, float(keep_ratio), n_slots, n_points,
+                  inputs=[coarse, *grid, half, n_cand, pixel_max, image_max, float(keep_ratio), n_slots, n_points,
                           slot_pixel, start, points, maps], device=dev)
         if dev.is_cpu:                 # (the host knows the count at no cost: only those points)
             points = points[:int(n_points.numpy()[0])]
