@@ -1,9 +1,10 @@
 """Who may write into a dataset root, and one writer at a time.
 
 The generator writes only into a root it owns: one that holds its manifest (`synth_manifest.json`). An empty or
-missing root is claimed by creating the manifest first, atomically (O_CREAT | O_EXCL), before anything else is
-written, so a concurrent job never sees generator output without the manifest. Any other content (e.g. the real
-MAROON dataset) makes the root foreign and it is never written. The generator's own hidden leftovers (temp folders
+missing root is claimed by creating the manifest first, atomically and already whole (a hard link to a written
+temp file), before anything else is written, so a concurrent job never sees generator output without the manifest,
+nor a manifest not yet written. Any other content (e.g. the real MAROON dataset) makes the root foreign and it is
+never written. The generator's own hidden leftovers (temp folders
 `<object>/.<distance>.tmp-<pid>-<token>` and `.old-` folders of a crashed run, lock and temp files) never make a
 root look foreign; they are removed by the next writer, judged by the lock, not by process ids (is_leftover).
 
@@ -22,6 +23,7 @@ import json
 import os
 import re
 import stat
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -62,9 +64,24 @@ def claim(root: Path) -> None:
     # is foreign only if there is still no manifest after the scan.
     if holds_foreign_data(root) and not manifest.is_file():
         raise ForeignRootError(root, f"holds data the generator did not write (no {MANIFEST_NAME}); not writing")
+    # Written whole to a temp file, then linked into place: link fails if the name exists, so the claim is
+    # atomic and no process ever reads a manifest that is created but not yet written.
+    tmp = root / f".{MANIFEST_NAME}.{os.getpid()}.{threading.get_ident()}.claim"
+    tmp.write_text(json.dumps({"captures": {}}))
+    try:
+        os.link(tmp, manifest)
+    except FileExistsError:          # another process claimed it first: it is the generator's all the same
+        pass
+    except OSError:                  # a file system without hard links: exclusive create, then write
+        _create_exclusive(manifest)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _create_exclusive(manifest: Path) -> None:
     try:
         fd = os.open(manifest, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-    except FileExistsError:          # another process claimed it first: it is the generator's all the same
+    except FileExistsError:
         return
     with os.fdopen(fd, "w") as handle:
         handle.write(json.dumps({"captures": {}}))

@@ -125,3 +125,39 @@ def test_a_manifest_naming_existing_captures_never_lets_them_be_overwritten(tmp_
     with pytest.raises(ForeignRootError, match="not overwriting"):
         generate_catalogue(root, [30], ["01_plate"], FAST)
     assert _capture_files(root) == before
+
+
+def test_a_claimed_manifest_is_whole_the_moment_it_exists(tmp_path, monkeypatch):
+    """claim() makes the manifest appear already written: a second process that looks right after the name
+    appears (here: inside the link call) finds a manifest it can verify, never an empty file (the race a
+    fresh-clone CI run once hit with three generators starting together)."""
+    import os
+
+    from bench.synth import ownership
+
+    root = tmp_path / "synthetic"
+    seen = []
+    real_link = os.link
+
+    def link_then_look(source, target, *args, **kwargs):
+        real_link(source, target, *args, **kwargs)
+        ownership.verify_manifest(root)                      # what a concurrent claimant's `exclusive` does first
+        seen.append(json.loads((root / ownership.MANIFEST_NAME).read_text()))
+
+    monkeypatch.setattr(ownership.os, "link", link_then_look)
+    ownership.claim(root)
+    assert seen == [{"captures": {}}]
+    assert sorted(p.name for p in root.iterdir()) == [ownership.MANIFEST_NAME]    # the temp file is gone
+
+
+def test_a_file_system_without_hard_links_still_claims_the_root(tmp_path, monkeypatch):
+    from bench.synth import ownership
+
+    def no_links(*args, **kwargs):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(ownership.os, "link", no_links)
+    root = tmp_path / "synthetic"
+    ownership.claim(root)
+    ownership.verify_manifest(root)
+    assert sorted(p.name for p in root.iterdir()) == [ownership.MANIFEST_NAME]
