@@ -33,6 +33,8 @@ from bench.synth.radar.frequency_nodes import interpolator
 
 RESEED_STEPS = 16       # exact phasors every 16 nodes bound the complex64 recursion error to ~1e-6
 BLOCK_ROWS = 2048       # rows per block: small enough that a block spans a few cm, large enough for BLAS
+CHUNK_ELEMENTS = 1 << 15   # elements per chunk of row_chunks: 256 kB of float64, within a core's L2 cache (the block's
+                           # (192, ~2000) arrays are 8x that: passes over them ran 2-3x slower, memory-bound)
 PARTIAL_SUMS = 2        # blocks alternate between two sums, one thread each: fixed, so results do not depend on
                         # the machine (the order of float32 additions is always the same)
 
@@ -41,15 +43,30 @@ PARTIAL_SUMS = 2        # blocks alternate between two sums, one thread each: fi
 Legs = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
+def row_chunks(n_rows: int, n_columns: int) -> list[slice]:
+    """Slices of rows holding about CHUNK_ELEMENTS elements each (at least one row): elementwise passes over a
+    (rows, columns) array done chunk by chunk stay in the core's cache (the same values: every element is computed
+    by the same operations)."""
+    step = max(1, CHUNK_ELEMENTS // max(1, n_columns))
+    return [slice(start, start + step) for start in range(0, n_rows, step)]
+
+
 def exact_phasors(path_m: np.ndarray, freq_hz) -> np.ndarray:
     """exp(-j 2 pi f path / c) as complex64: phase reduced modulo one cycle in float64, then float32 cos/sin."""
-    cycles = path_m * (np.asarray(freq_hz) / C_M_PER_S)
-    cycles -= np.rint(cycles)
-    angle = (cycles * (-2.0 * np.pi)).astype(np.float32)
-    parts = np.empty(angle.shape + (2,), dtype=np.float32)
-    np.cos(angle, out=parts[..., 0])
-    np.sin(angle, out=parts[..., 1])
-    return parts.view(np.complex64)[..., 0]
+    scale = np.asarray(freq_hz) / C_M_PER_S
+    shape = np.broadcast_shapes(np.shape(path_m), scale.shape)
+    out = np.empty(shape, dtype=np.complex64)
+    table = (int(np.prod(shape[:1])), int(np.prod(shape[1:])))     # (first axis, the rest); a scalar as (1, 1)
+    path_m, scale = (np.broadcast_to(a, shape).reshape(table) for a in (path_m, scale))
+    flat = out.reshape(table)
+    for rows in row_chunks(*path_m.shape):
+        cycles = path_m[rows] * scale[rows]
+        cycles -= np.rint(cycles)
+        cycles *= -2.0 * np.pi
+        angle = cycles.astype(np.float32)
+        flat[rows].real = np.cos(angle)
+        flat[rows].imag = np.sin(angle)
+    return out
 
 
 def compact_blocks(positions: np.ndarray, block_rows: int = BLOCK_ROWS) -> list[np.ndarray]:
@@ -164,6 +181,7 @@ def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx
         return at_nodes
     every = (fit @ at_nodes.reshape(len(nodes_hz), -1)).reshape((len(freqs_hz), *at_nodes.shape[1:]))
     centre_phasor = exact_phasors(centre[None, :], freqs_hz[:, None])          # the centre path, factored out
-    every *= centre_phasor[:, :n_rx, None]
-    every *= centre_phasor[:, None, n_rx:]
+    for f in row_chunks(len(freqs_hz), every[0].size):
+        every[f] *= centre_phasor[f, :n_rx, None]
+        every[f] *= centre_phasor[f, None, n_rx:]
     return every
