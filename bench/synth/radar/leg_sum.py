@@ -33,8 +33,9 @@ from bench.synth.radar.frequency_nodes import interpolator
 
 RESEED_STEPS = 16       # exact phasors every 16 nodes bound the complex64 recursion error to ~1e-6
 BLOCK_ROWS = 2048       # rows per block: small enough that a block spans a few cm, large enough for BLAS
-CHUNK_ELEMENTS = 1 << 15   # elements per chunk of row_chunks: 256 kB of float64, within a core's L2 cache (the block's
-                           # (192, ~2000) arrays are 8x that: passes over them ran 2-3x slower, memory-bound)
+CHUNK_ELEMENTS = 1 << 16   # elements per chunk of row_chunks: 512 kB of float64, a pass and its temporaries within a
+                           # core's L2 cache (a block's (192, ~2000) arrays are 6x that: passes over them ran 2-3x
+                           # slower, memory-bound); not smaller: each chunk's calls take the GIL the other threads want
 PARTIAL_SUMS = 2        # blocks alternate between two sums, one thread each: fixed, so results do not depend on
                         # the machine (the order of float32 additions is always the same)
 
@@ -181,7 +182,6 @@ def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx
         return at_nodes
     every = (fit @ at_nodes.reshape(len(nodes_hz), -1)).reshape((len(freqs_hz), *at_nodes.shape[1:]))
     centre_phasor = exact_phasors(centre[None, :], freqs_hz[:, None])          # the centre path, factored out
-    for f in row_chunks(len(freqs_hz), every[0].size):
-        every[f] *= centre_phasor[f, :n_rx, None]
-        every[f] *= centre_phasor[f, None, n_rx:]
+    every *= centre_phasor[:, :n_rx, None]
+    every *= centre_phasor[:, None, n_rx:]
     return every
