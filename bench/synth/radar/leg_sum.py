@@ -133,29 +133,34 @@ def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: n
     blocks = compact_blocks(np.asarray(positions, dtype=np.float64), BLOCK_ROWS)
     pool = _block_pool()
 
-    def block(rows: np.ndarray) -> np.ndarray | None:
-        return block_sum(*legs(rows), freqs_hz, n_rx)
+    def block(rows: np.ndarray, into: np.ndarray | None) -> np.ndarray | None:
+        return block_sum(*legs(rows), freqs_hz, n_rx, into)
 
     window = 2 * _threads()      # blocks in flight (each result is F x n_rx x n_tx complex64: ~9 MB)
     pending: collections.deque = collections.deque()
-    with single_threaded_blas():
+    spare: list[np.ndarray] = []      # results already added, written over by later blocks: fresh ~9 MB arrays
+    with single_threaded_blas():      # cost page faults (a fifth of the generator's system time)
         for number, rows in enumerate(blocks):
-            pending.append((number, pool.submit(block, rows)))
+            pending.append((number, pool.submit(block, rows, spare.pop() if spare else None)))
             while len(pending) >= window or (number == len(blocks) - 1 and pending):
                 done, future = pending.popleft()
                 contribution = future.result()
                 if contribution is not None:
                     outs[done % PARTIAL_SUMS] += contribution
+                    if contribution.shape == outs[0].shape:
+                        spare.append(contribution)
     out = outs[0]
     for other in outs[1:]:
         out += other
     return np.ascontiguousarray(out.transpose(1, 2, 0))
 
 
-def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx: int) -> np.ndarray | None:
+def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx: int,
+              into: np.ndarray | None = None) -> np.ndarray | None:
     """One block's sum (F, n_rx, n_tx) complex64 (path_m, weight: (n_rx + n_tx, k), receive legs first; None for
-    no rows): at the node frequencies, then interpolated to every frequency. Added to a sum it gives what adding
-    node by node gave (0 + x is x)."""
+    no rows): at the node frequencies, then interpolated to every frequency, into `into` (a C-contiguous
+    complex64 array of that shape, overwritten) where given. Added to a sum it gives what adding node by node gave
+    (0 + x is x)."""
     if path_m.shape[1] == 0:
         return None
     low, high = path_m.min(axis=1), path_m.max(axis=1)
@@ -180,7 +185,9 @@ def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx
         np.matmul(phasor[:n_rx], phasor[n_rx:].T, out=at_nodes[n])     # rows: receive legs, then transmit legs
     if fit is None:
         return at_nodes
-    every = (fit @ at_nodes.reshape(len(nodes_hz), -1)).reshape((len(freqs_hz), *at_nodes.shape[1:]))
+    shape = (len(freqs_hz), *at_nodes.shape[1:])
+    every = np.empty(shape, dtype=np.complex64) if into is None else into
+    np.matmul(fit, at_nodes.reshape(len(nodes_hz), -1), out=every.reshape(len(freqs_hz), -1))
     centre_phasor = exact_phasors(centre[None, :], freqs_hz[:, None])          # the centre path, factored out
     every *= centre_phasor[:, :n_rx, None]
     every *= centre_phasor[:, None, n_rx:]
