@@ -102,6 +102,20 @@ def _plan_of(freqs_hz, antennas, z_m, dz_m, skips: SkipSettings):
                                                   skips.candidate_margin_db)
 
 
+def _host_search_options(skips: SkipSettings, grid, pixels: np.ndarray) -> dict:
+    """`bp_search.search_depth`'s shortcuts as `skips` set them (only with `bp_coarse_to_fine`): the pixel lattice
+    over the searched `pixels` (ny, nx) bool, and local-maximum candidates."""
+    if not skips.bp_coarse_to_fine:
+        return {}
+    lattice = None
+    if skips.search_lattice_step_m > 0:
+        step_px = skips.lattice_px(pixel_pitch_m(grid), skips.search_lattice_step_m)[0]
+        if step_px > 1:
+            rows, cols = np.nonzero(pixels)                 # the order of x_img[pixels]
+            lattice = bp_search.Lattice(rows, cols, step_px, skips.search_lattice_margin_db)
+    return {"lattice": lattice, "local_max": skips.search_local_max}
+
+
 def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi: Roi, skips: SkipSettings,
                       threshold_db, backend, timer, extra: dict):
     """Depth and max projection (ny, nx) over the ROI's pixels and the depths z_m (z_outer, the grid's or the prior
@@ -148,7 +162,8 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                     hull_m)
                 found_depth = None if on_device is None else bp_search.SearchResult(*on_device)
                 if found_depth is None:
-                    found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges)
+                    found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges,
+                                                         **_host_search_options(skips, grid, pixels))
                 depth_m[pixels], max_proj[pixels] = found_depth.depth_m, found_depth.max_projection
                 n_evaluated += found_depth.n_evaluated
     extra.update(roi_px=int(pixels.sum()), roi_z_m=(float(z_m[0]), float(z_m[-1])) if len(z_m) else None,
