@@ -162,8 +162,10 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                     hull_m)
                 found_depth = None if on_device is None else bp_search.SearchResult(*on_device)
                 if found_depth is None:
+                    options = _host_search_options(skips, grid, pixels)
                     found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges,
-                                                         **_host_search_options(skips, grid, pixels))
+                                                         **options)
+                    extra["search_lattice_px"] = options["lattice"].step if options.get("lattice") else 1
                 depth_m[pixels], max_proj[pixels] = found_depth.depth_m, found_depth.max_projection
                 n_evaluated += found_depth.n_evaluated
     extra.update(roi_px=int(pixels.sum()), roi_z_m=(float(z_m[0]), float(z_m[-1])) if len(z_m) else None,
