@@ -223,16 +223,20 @@ def test_coarse_to_fine_misses_a_peak_when_the_condition_fails():
     assert found.depth_m[0] == full.depth_m[0]
 
 
-def test_nearest_evaluated_neighbours_match_a_plain_loop(record_property):
+def test_candidates_match_a_plain_loop(record_property):
     rng = fresh_rng(record_property)
-    mag = np.where(rng.random((40, 30)) < 0.3, rng.random((40, 30)), -1.0).astype(np.float32)
-    below, above = bp_search._nearest_evaluated(mag)
-    for p in range(mag.shape[1]):
-        ev = np.flatnonzero(mag[:, p] >= 0)
-        for k in range(mag.shape[0]):
-            lo, hi = ev[ev < k], ev[ev > k]
-            assert below[k, p] == (mag[lo[-1], p] if len(lo) else -1.0)
-            assert above[k, p] == (mag[hi[0], p] if len(hi) else -1.0)
+    mag = np.where(rng.random((30, 40)) < 0.3, rng.random((30, 40)), -1.0).astype(np.float32)   # (pixels, depths)
+    ratio = rng.uniform(0.2, 0.9, 30)
+    for local_max in (False, True):
+        want = []
+        for p in range(mag.shape[0]):
+            ev = np.flatnonzero(mag[p] >= 0)
+            for j, k in enumerate(ev):
+                near = mag[p, ev[max(j - 1, 0):j + 2]]
+                if mag[p, k] >= mag[p].max() * ratio[p] and (not local_max or mag[p, k] >= near.max()):
+                    want.append((p, k))
+        got = bp_search._candidates(mag, ratio, local_max)
+        assert list(zip(*(a.tolist() for a in got), strict=True)) == want
 
 
 def _search_pair(evaluate, x, y, z_m, plan, **options):
