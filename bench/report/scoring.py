@@ -25,7 +25,12 @@ GROUP_COLUMNS = ["method", "freq", "prior", "grid"]
 PARAMETERS = "params"           # swept settings of a row (bench.harness.app: `offset_mm=2`), when present
 CAPTURE_COLUMNS = ["object", "distance", "frame"]
 PER_CAPTURE = ["object", "distance"]
-COVERAGE_FLOOR_PCT = 10.0
+# The least share of the silhouette that still counts as a reconstruction. A smooth ball shows the array only the cap
+# whose normals bisect a transmit and a receive direction: 5.4 % of its silhouette at 30 cm, 1.6 % at 60 cm (the
+# generator's farthest distance; tests/bench/report/test_scoring.py computes it from the QAR50 array), so a floor
+# above that fails an ideal radar on a ball. 1 % stays below it and above the stray-pixel "successes" the floor is
+# for (3-26 of 6,127 silhouette pixels, 0.05-0.4 %).
+COVERAGE_FLOOR_PCT = 1.0
 NOT_RUN = "not run"
 
 

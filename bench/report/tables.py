@@ -7,12 +7,12 @@ grid (x swept parameters, the `params` column, where the rows carry it), metrics
 order.
 
 Fair comparison (bench.report.scoring): a row reconstructed a capture when its metrics are defined and its points
-cover at least `--coverage-floor` (10 %) of the ground-truth silhouette; every other capture of the table is one
-of the row's failures (also one it was not run on), listed with its reason and counted in `failed`. Every mean of
-a metric is over the captures where every row of the table counts that metric: P and P_e where every row
-reconstructed the capture, C_g, C_s, coverage and off % wherever every row defines them (a failure included). So
-all rows of a table are compared on the same captures, bold marks the best mean per metric (BP_max excluded, as in
-the paper: the many-frequency reference, not a high-speed method) and the ranking follows the means.
+cover at least `--coverage-floor` (scoring.COVERAGE_FLOOR_PCT, 1 %) of the ground-truth silhouette; every other
+capture of the table is one of the row's failures (also one it was not run on), listed with its reason and counted
+in `failed`. Every mean of a metric is over the captures where every row of the table counts that metric: P and P_e
+where every row reconstructed the capture, C_g, C_s, coverage and off % wherever every row defines them (a failure
+included). So all rows of a table are compared on the same captures, bold marks the best mean per metric (BP_max
+excluded, as in the paper: the many-frequency reference, not a high-speed method) and the ranking follows the means.
 Uncertainty (bench.report.uncertainty): each mean with its 95 % bootstrap interval over captures, and each row
 against the best row per metric, paired per capture (in how many captures it is better, permutation-test p).
 Runtimes are means over rows timed alone (`timing == alone`); rows timed while other jobs shared the machine are

@@ -4,6 +4,7 @@ buffers. On CUDA a new frame uploads its raw samples once and builds the tensor-
 (`table_kernels`); Warp-CPU builds them on the host (the reference the tests compare with)."""
 from __future__ import annotations
 
+from collections import OrderedDict
 from functools import cached_property
 
 import numpy as np
@@ -211,9 +212,12 @@ class BufferPool:
     """Pre-allocated device buffers reused between calls, one per name (outputs are copied back before a call
     returns); a new shape or dtype replaces the buffer of that name."""
 
+    CONSTANTS_KEPT = 8      # grids differ per capture and ROI: the least recently used constants go beyond these
+
     def __init__(self, wp_device: str):
         self.wp_device = wp_device
         self._buffers: dict = {}
+        self._constants: OrderedDict = OrderedDict()
 
     def get(self, name: str, shape, dtype) -> wp.array:
         key = (name, shape, dtype)
@@ -224,10 +228,15 @@ class BufferPool:
         return self._buffers[key]
 
     def constant(self, key, build):
-        """The arrays `build()` made the first time `key` (hashable, e.g. a grid) was asked for."""
-        if ("constant", key) not in self._buffers:
-            self._buffers[("constant", key)] = build()
-        return self._buffers[("constant", key)]
+        """The arrays `build()` made the first time `key` (hashable, e.g. a grid) was asked for, kept for the
+        CONSTANTS_KEPT most recently used keys."""
+        if key in self._constants:
+            self._constants.move_to_end(key)
+        else:
+            self._constants[key] = build()
+            while len(self._constants) > self.CONSTANTS_KEPT:
+                self._constants.popitem(last=False)
+        return self._constants[key]
 
     def pinned(self, shape, dtype, name: str = "pinned") -> wp.array:
         """A reused page-locked host staging buffer of that name (the last shape asked for)."""

@@ -121,12 +121,12 @@ def test_a_capture_below_the_coverage_floor_is_a_failure():
 
     rows = _rows([("mm2fsk", "d10", "realsense", 0.5), ("2fsk", "d05", "none", 0.1)])
     rows["coverage_pct"] = 80.0
-    rows.loc[(rows.method == "2fsk") & (rows.object == "03_sphere"), "coverage_pct"] = 4.0   # 3 stray pixels
+    rows.loc[(rows.method == "2fsk") & (rows.object == "03_sphere"), "coverage_pct"] = 0.4   # 26 stray pixels
     line = summarise(rows).set_index("row")
     assert line.loc["2FSK Δ0.5", "failed"] == 1
-    assert line.loc["2FSK Δ0.5", "failures"] == "03_sphere 30: covers 4.0 % of the silhouette (floor 10 %)"
+    assert line.loc["2FSK Δ0.5", "failures"] == "03_sphere 30: covers 0.4 % of the silhouette (floor 1 %)"
     assert (line.P_cm_n == 1).all() and line.loc["MM-2FSK Δ10.0", "P_cm"] == pytest.approx(0.5)
-    assert summarise(rows, floor_pct=3.0).failed.sum() == 0
+    assert summarise(rows, floor_pct=0.3).failed.sum() == 0
 
 
 def test_a_missing_row_is_a_failure_and_contended_runtimes_are_not_shown():

@@ -73,3 +73,16 @@ def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
     assert not np.any(skipped & kept)
     assert np.array_equal(cut_depth[~skipped], got_depth[~skipped])
     assert np.all(cut_proj[skipped] <= got_proj[skipped]) and np.all(cut_proj[skipped] < 0.1 * got_proj.max())
+
+
+def test_the_pool_keeps_the_constants_of_the_last_grids_only():
+    """Each capture's ROI makes its own search grid: a long sweep must not keep every grid's device arrays."""
+    from methods.backends.warp.frames import BufferPool
+
+    pool, built = BufferPool("cpu"), []
+    for grid in [*range(BufferPool.CONSTANTS_KEPT + 5), 0]:
+        pool.constant(("grid", grid), lambda grid=grid: built.append(grid) or grid)
+    assert len(pool._constants) == BufferPool.CONSTANTS_KEPT
+    assert built[-1] == 0 and built.count(0) == 2                  # grid 0 was dropped, so it was built again
+    pool.constant(("grid", BufferPool.CONSTANTS_KEPT + 4), lambda: built.append("again"))
+    assert built[-1] == 0                                          # a kept grid is not rebuilt

@@ -33,37 +33,6 @@ def compact_covered_pixels(n_cols: int, zbuf: wp.array(dtype=wp.float64), x_m: w
         maps[2, p] = nan
 
 
-@wp.kernel(enable_backward=False)
-def fsk_depth_at_prior(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
-                       maps: wp.array2d(dtype=wp.float64), peak: wp.array(dtype=wp.float32)):
-    """depth = prior - c angle(c2 conj c1) / (4 pi (f2 - f1)); magnitude = |(c1 + c2) / 2| (float32 as numpy)."""
-    i = wp.tid()
-    p = pixel[i]
-    c1 = ph[0, i]
-    c2 = ph[1, i]
-    re = c2[0] * c1[0] + c2[1] * c1[1]
-    im = c2[1] * c1[0] - c2[0] * c1[1]
-    maps[0, p] = maps[2, p] - m_per_rad * wp.float64(wp.atan2(im, re))
-    mean = (c1 + c2) * wp.float32(0.5)
-    mag = wp.length(mean)
-    maps[1, p] = wp.float64(mag)
-    wp.atomic_max(peak, i % peak.shape[0], mag)
-
-
-@wp.kernel(enable_backward=False)
-def magnitude_filter(pixel: wp.array(dtype=wp.int32), keep_ratio: wp.float64, peak: wp.array(dtype=wp.float32),
-                     maps: wp.array2d(dtype=wp.float64)):
-    """`filtering.keep_mask`: depth NaN where magnitude is 0 or < max * keep_ratio (10^(-threshold_db / 20), 0 for
-    no threshold)."""
-    p = pixel[wp.tid()]
-    mag = maps[1, p]
-    if mag <= wp.float64(0.0) or mag < wp.float64(peak[0]) * keep_ratio:
-        maps[0, p] = wp.float64(wp.nan)
-
-
-# 2FSK and 3FSK with a scalar prior on the device (`methods.backends.warp.fsk.two_pass` / `three_fsk`): the points
-# of a pass are made here, pass 1's strongest pixel is found by a reduction, and the depth and filter stay here.
-
 @wp.func
 def pair_correction_m(c1: wp.vec2f, c2: wp.vec2f, m_per_rad: wp.float64):
     """`fsk.depth_correction_m`: m_per_rad * angle(c2 conj c1) (float32 phase, as numpy's complex64)."""
@@ -71,6 +40,49 @@ def pair_correction_m(c1: wp.vec2f, c2: wp.vec2f, m_per_rad: wp.float64):
     im = c2[1] * c1[0] - c2[0] * c1[1]
     return m_per_rad * wp.float64(wp.atan2(im, re))
 
+
+# Each per-point step is one wp.func, launched by a kernel over n points and by its `_counted` twin over a launch of
+# fixed size (a CUDA graph), whose threads from count[0] on do nothing.
+
+@wp.func
+def depth_at_prior_at(i: int, ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
+                      m_per_rad: wp.float64, maps: wp.array2d(dtype=wp.float64), peak: wp.array(dtype=wp.float32)):
+    """depth = prior - c angle(c2 conj c1) / (4 pi (f2 - f1)); magnitude = |(c1 + c2) / 2| (float32 as numpy)."""
+    p = pixel[i]
+    c1 = ph[0, i]
+    c2 = ph[1, i]
+    maps[0, p] = maps[2, p] - pair_correction_m(c1, c2, m_per_rad)
+    mag = wp.length((c1 + c2) * wp.float32(0.5))
+    maps[1, p] = wp.float64(mag)
+    wp.atomic_max(peak, i % peak.shape[0], mag)
+
+
+@wp.kernel(enable_backward=False)
+def fsk_depth_at_prior(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
+                       maps: wp.array2d(dtype=wp.float64), peak: wp.array(dtype=wp.float32)):
+    """`depth_at_prior_at` at every point."""
+    depth_at_prior_at(wp.tid(), ph, pixel, m_per_rad, maps, peak)
+
+
+@wp.func
+def magnitude_filter_at(p: int, keep_ratio: wp.float64, peak: wp.array(dtype=wp.float32),
+                        maps: wp.array2d(dtype=wp.float64)):
+    """`filtering.keep_mask`: depth NaN where magnitude is 0 or < max * keep_ratio (10^(-threshold_db / 20), 0 for
+    no threshold)."""
+    mag = maps[1, p]
+    if mag <= wp.float64(0.0) or mag < wp.float64(peak[0]) * keep_ratio:
+        maps[0, p] = wp.float64(wp.nan)
+
+
+@wp.kernel(enable_backward=False)
+def magnitude_filter(pixel: wp.array(dtype=wp.int32), keep_ratio: wp.float64, peak: wp.array(dtype=wp.float32),
+                     maps: wp.array2d(dtype=wp.float64)):
+    """`magnitude_filter_at` at every point's pixel."""
+    magnitude_filter_at(pixel[wp.tid()], keep_ratio, peak, maps)
+
+
+# 2FSK and 3FSK with a scalar prior on the device (`methods.backends.warp.fsk.two_pass` / `three_fsk`): the points
+# of a pass are made here, pass 1's strongest pixel is found by a reduction, and the depth and filter stay here.
 
 @wp.kernel(enable_backward=False)
 def points_at_depth(pixel: wp.array(dtype=wp.int32), n_cols: int, x_m: wp.array(dtype=wp.float64),
@@ -132,13 +144,12 @@ def refocus_points_from_first(ph: wp.array2d(dtype=wp.vec2f), ref: wp.array(dtyp
         scalars[1] = wp.float64(ref[0])
 
 
-@wp.kernel(enable_backward=False)
-def pair_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
-               first_only: int, points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
-               peak: wp.array(dtype=wp.float32)):
+@wp.func
+def pair_depth_at(i: int, ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
+                  first_only: int, points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
+                  peak: wp.array(dtype=wp.float32)):
     """2FSK pass 2: depth = guess - correction, magnitude |(c1 + c2) / 2| (or |c1| with first_only: the faithful
     filter); peak = their maximum (zeroed before)."""
-    i = wp.tid()
     p = pixel[i]
     c1 = ph[0, i]
     c2 = ph[1, i]
@@ -151,14 +162,28 @@ def pair_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), 
 
 
 @wp.kernel(enable_backward=False)
-def coarse_points(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
-                  points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64)):
-    """3FSK's coarse step: each point moves to its coarse depth guess - correction (maps[2] = coarse depth)."""
-    i = wp.tid()
+def pair_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
+               first_only: int, points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
+               peak: wp.array(dtype=wp.float32)):
+    """`pair_depth_at` at every point."""
+    pair_depth_at(wp.tid(), ph, pixel, m_per_rad, first_only, points, maps, peak)
+
+
+@wp.func
+def coarse_point_at(i: int, ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
+                    points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64)):
+    """3FSK's coarse step: the point moves to its coarse depth guess - correction (maps[2] = coarse depth)."""
     q = points[i]
     coarse = q[2] - pair_correction_m(ph[0, i], ph[1, i], m_per_rad)
     points[i] = wp.vec3d(q[0], q[1], coarse)
     maps[2, pixel[i]] = coarse
+
+
+@wp.kernel(enable_backward=False)
+def coarse_points(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), m_per_rad: wp.float64,
+                  points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64)):
+    """`coarse_point_at` at every point."""
+    coarse_point_at(wp.tid(), ph, pixel, m_per_rad, points, maps)
 
 
 @wp.func
@@ -175,51 +200,45 @@ def slope_depth_at(c1: wp.vec2f, c2: wp.vec2f, c3: wp.vec2f, centred_hz: wp.vec3
     return guess_m - m_per_rad_hz * slope, wp.length((c1 + c2 + c3) / wp.float32(3.0))
 
 
-@wp.kernel(enable_backward=False)
-def slope_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), centred_hz: wp.vec3d,
-                m_per_rad_hz: wp.float64, points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
-                peak: wp.array(dtype=wp.float32)):
-    """3FSK's fine step (`slope_depth_at` at each point's coarse depth); peak = the magnitudes' maximum (zeroed
+@wp.func
+def slope_depth_point(i: int, ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
+                      centred_hz: wp.vec3d, m_per_rad_hz: wp.float64, points: wp.array(dtype=wp.vec3d),
+                      maps: wp.array2d(dtype=wp.float64), peak: wp.array(dtype=wp.float32)):
+    """3FSK's fine step (`slope_depth_at` at the point's coarse depth); peak = the magnitudes' maximum (zeroed
     before)."""
-    i = wp.tid()
-    p = pixel[i]
     depth, mag = slope_depth_at(ph[0, i], ph[1, i], ph[2, i], centred_hz, m_per_rad_hz, points[i][2])
+    p = pixel[i]
     maps[0, p] = depth
     maps[1, p] = wp.float64(mag)
     wp.atomic_max(peak, i % peak.shape[0], mag)
 
 
 @wp.kernel(enable_backward=False)
+def slope_depth(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32), centred_hz: wp.vec3d,
+                m_per_rad_hz: wp.float64, points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
+                peak: wp.array(dtype=wp.float32)):
+    """`slope_depth_point` at every point."""
+    slope_depth_point(wp.tid(), ph, pixel, centred_hz, m_per_rad_hz, points, maps, peak)
+
+
+@wp.kernel(enable_backward=False)
 def depth_at_prior_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
                            count: wp.array(dtype=wp.int32), m_per_rad: wp.float64, maps: wp.array2d(dtype=wp.float64),
                            peak: wp.array(dtype=wp.float32)):
-    """`fsk_depth_at_prior` over a launch of fixed size (a CUDA graph): threads from count[0] on do nothing."""
+    """`depth_at_prior_at` at points below count[0]."""
     i = wp.tid()
-    if i >= count[0]:
-        return
-    p = pixel[i]
-    c1 = ph[0, i]
-    c2 = ph[1, i]
-    re = c2[0] * c1[0] + c2[1] * c1[1]
-    im = c2[1] * c1[0] - c2[0] * c1[1]
-    maps[0, p] = maps[2, p] - m_per_rad * wp.float64(wp.atan2(im, re))
-    mag = wp.length((c1 + c2) * wp.float32(0.5))
-    maps[1, p] = wp.float64(mag)
-    wp.atomic_max(peak, i % peak.shape[0], mag)
+    if i < count[0]:
+        depth_at_prior_at(i, ph, pixel, m_per_rad, maps, peak)
 
 
 @wp.kernel(enable_backward=False)
 def magnitude_filter_counted(pixel: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
                              keep_ratio: wp.float64, peak: wp.array(dtype=wp.float32),
                              maps: wp.array2d(dtype=wp.float64)):
-    """`magnitude_filter` over a launch of fixed size: threads from count[0] on do nothing."""
+    """`magnitude_filter_at` at the pixels of points below count[0]."""
     i = wp.tid()
-    if i >= count[0]:
-        return
-    p = pixel[i]
-    mag = maps[1, p]
-    if mag <= wp.float64(0.0) or mag < wp.float64(peak[0]) * keep_ratio:
-        maps[0, p] = wp.float64(wp.nan)
+    if i < count[0]:
+        magnitude_filter_at(pixel[i], keep_ratio, peak, maps)
 
 
 PEAK_SHARDS = wp.constant(256)   # partial maxima of the magnitude (the kernels' shards arrays; reduce_peak)
@@ -368,15 +387,10 @@ def slope_depth_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp
                         count: wp.array(dtype=wp.int32), centred_hz: wp.vec3d, m_per_rad_hz: wp.float64,
                         points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
                         peak: wp.array(dtype=wp.float32)):
-    """`slope_depth` over a launch of fixed size: threads from count[0] on do nothing."""
+    """`slope_depth_point` at points below count[0]."""
     i = wp.tid()
-    if i >= count[0]:
-        return
-    depth, mag = slope_depth_at(ph[0, i], ph[1, i], ph[2, i], centred_hz, m_per_rad_hz, points[i][2])
-    p = pixel[i]
-    maps[0, p] = depth
-    maps[1, p] = wp.float64(mag)
-    wp.atomic_max(peak, i % peak.shape[0], mag)
+    if i < count[0]:
+        slope_depth_point(i, ph, pixel, centred_hz, m_per_rad_hz, points, maps, peak)
 
 
 @wp.kernel(enable_backward=False)
@@ -440,31 +454,18 @@ def pair_depth_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.
                        count: wp.array(dtype=wp.int32), m_per_rad: wp.float64, first_only: int,
                        points: wp.array(dtype=wp.vec3d), maps: wp.array2d(dtype=wp.float64),
                        peak: wp.array(dtype=wp.float32)):
-    """`pair_depth` over a launch of fixed size: threads from count[0] on do nothing."""
+    """`pair_depth_at` at points below count[0]."""
     i = wp.tid()
-    if i >= count[0]:
-        return
-    p = pixel[i]
-    c1 = ph[0, i]
-    c2 = ph[1, i]
-    maps[0, p] = points[i][2] - pair_correction_m(c1, c2, m_per_rad)
-    mag = wp.length((c1 + c2) * wp.float32(0.5))
-    if first_only != 0:
-        mag = wp.length(c1)
-    maps[1, p] = wp.float64(mag)
-    wp.atomic_max(peak, i % peak.shape[0], mag)
+    if i < count[0]:
+        pair_depth_at(i, ph, pixel, m_per_rad, first_only, points, maps, peak)
 
 
 @wp.kernel(enable_backward=False)
 def coarse_points_counted(ph: wp.array2d(dtype=wp.vec2f), pixel: wp.array(dtype=wp.int32),
                           count: wp.array(dtype=wp.int32), m_per_rad: wp.float64, points: wp.array(dtype=wp.vec3d),
                           maps: wp.array2d(dtype=wp.float64)):
-    """`coarse_points` over a launch of fixed size: threads from count[0] on do nothing."""
+    """`coarse_point_at` at points below count[0]."""
     i = wp.tid()
-    if i >= count[0]:
-        return
-    q = points[i]
-    coarse = q[2] - pair_correction_m(ph[0, i], ph[1, i], m_per_rad)
-    points[i] = wp.vec3d(q[0], q[1], coarse)
-    maps[2, pixel[i]] = coarse
+    if i < count[0]:
+        coarse_point_at(i, ph, pixel, m_per_rad, points, maps)
 
