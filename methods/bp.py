@@ -11,9 +11,10 @@ and pixels without a prior stay NaN.
 
 Region of interest and skips (methods.skips.roi, methods.skips.settings): with an ROI, only its pixels and depths are
 evaluated (the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device,
-through the point kernels) and, on the CPU with many frequencies, on range-compressed profiles
-(methods.skips.bp_search, methods.backends.cpu_range); with many frequencies on CUDA the coarse ROI's pass and the
-whole search run on the device (`Backend.coarse_peaks`, `Backend.search_depth`: same rules and results). With no ROI
+through the point kernels; on the host with local-maximum candidates and a 2 mm pixel lattice) and, on the CPU with
+many frequencies, on range-compressed profiles (methods.skips.bp_search, methods.backends.cpu_range); with many
+frequencies on CUDA the coarse ROI's pass and the whole search run on the device (`Backend.coarse_peaks`,
+`Backend.search_depth`: the same rules as the host's without its two shortcuts, and results). With no ROI
 and no skip (`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
 from __future__ import annotations
