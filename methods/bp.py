@@ -141,11 +141,9 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                 def coarse_peaks(x_m, y_m, z_c, step):       # on the device where the backend can
                     return None if use_range else backend.coarse_peaks(signal, freqs_hz, antennas.tx_m,
                                                                        antennas.rx_m, x_m, y_m, z_c, step, hull_m)
-                inherit = (skips.search_lattice_margin_db if skips.bp_coarse_to_fine and skips.search_lattice_step_m > 0
-                           else None)
                 found, n_coarse = bp_search.coarse_roi(evaluate, pixels, x_img, y_img, z_m, plan_of, threshold_db,
                                                        step_px, radius_px, skips.roi_keep_margin_db,
-                                                       skips.roi_margin_m, coarse_peaks, inherit)
+                                                       skips.roi_margin_m, coarse_peaks)
                 n_evaluated += n_coarse
                 extra["coarse_roi_voxels"] = n_coarse
                 keep_z = (z_m >= found.z_min_m - 1e-9) & (z_m <= found.z_max_m + 1e-9)

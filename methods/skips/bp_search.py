@@ -361,34 +361,23 @@ def _climb(samples: _Samples, active: np.ndarray) -> None:
 
 def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray,
                plan_of: Callable[[np.ndarray, np.ndarray], SearchPlan], threshold_db: float, lattice_step_px: int,
-               radius_px: int, keep_margin_db: float, margin_m: float, coarse_peaks: CoarsePeaks | None = None,
-               inherit_margin_db: float | None = None) -> tuple[Roi, int]:
+               radius_px: int, keep_margin_db: float, margin_m: float, coarse_peaks: CoarsePeaks | None = None
+               ) -> tuple[Roi, int]:
     """The object's ROI from a coarse pass: depth samples at twice the search plan's coarse step (`plan_of(x, y)`)
     at the lattice pixels (every `lattice_step_px`-th) of `pixels` (ny, nx) bool; x_m, y_m (ny, nx) pixel centres;
     z_m the depths inside the current ROI.
 
     Lattice pixels whose coarse maximum is within threshold + keep_margin_db of the lattice maximum mark the pixels
     within `radius_px` in x and y; the depth range is their coarse peaks +- (that coarse step + margin_m). The
-    doubled step loses at most a few dB at a peak, inside keep_margin_db. With `inherit_margin_db` (host pass
-    only) every 2nd lattice pixel evaluates its coarse samples and the others inherit them from those as the
-    search's `Lattice` does, local maxima within the window + that margin. Returns (the ROI within `pixels` and
+    doubled step loses at most a few dB at a peak, inside keep_margin_db. Returns (the ROI within `pixels` and
     z_m's range, samples evaluated)."""
     grid_lattice = lattice(pixels, lattice_step_px)
     x_l, y_l = x_m[grid_lattice], y_m[grid_lattice]
-    plan = plan_of(x_l, y_l)
-    step = np.minimum(2 * plan.step, max(len(z_m) - 1, 1))
+    step = np.minimum(2 * plan_of(x_l, y_l).step, max(len(z_m) - 1, 1))
     found = coarse_peaks(x_l, y_l, z_m, step) if coarse_peaks is not None else None
     if found is None:
         samples = _Samples(evaluate, x_l, y_l, z_m)
-        if inherit_margin_db is None:
-            samples.run_coarse(step)
-        else:
-            rows, cols = np.nonzero(grid_lattice)               # the order of x_l
-            start = lattice_step_px // 2
-            samples.run_inherited(step, 10.0 ** (-plan.candidate_db(step) / 20.0),
-                                  Lattice((rows - start) // lattice_step_px, (cols - start) // lattice_step_px, 2,
-                                          inherit_margin_db), local_max=True)
-        peak = np.maximum(samples.mag.max(axis=0), 0.0)
+        peak = samples.run_coarse(step)
         found = peak, np.argmax(samples.mag, axis=0), samples.count   # unevaluated hold -1: never the argmax
     peak, peak_k, n_evaluated = found
     peak_z = z_m[peak_k]

@@ -289,31 +289,6 @@ def test_pixel_lattice_inherits_the_peaks_of_laterally_smooth_profiles(record_pr
     assert own.sum() == 12 * 12 + 2 * 24 - 1 and (corners[~own] >= 0).all()   # lattice + last row and column
 
 
-def test_coarse_roi_with_inherited_lattice_samples_finds_the_same_roi(record_property):
-    # the coarse ROI's pass with every 2nd lattice pixel evaluating and the others inheriting (laterally smooth
-    # profiles, a disc of strong pixels on a weak floor) marks the same pixels and depth range with fewer samples
-    rng = fresh_rng(record_property)
-    n_side, width_m, dz_m = 48, 0.006, 0.001
-    rows, cols = np.divmod(np.arange(n_side * n_side), n_side)
-    disc = np.hypot(rows - rng.uniform(18, 30), cols - rng.uniform(18, 30)) < 12
-    centres = np.stack([0.27 + 0.0004 * rows, 0.33 - 0.0003 * cols], axis=1)
-    amplitudes = np.stack([np.where(disc, 1.0, 0.02), np.where(disc, 0.6, 0.01)], axis=1)
-    evaluate = _gaussian_profiles(centres, amplitudes, width_m)
-    z_m = np.arange(0.24, 0.36 + 1e-9, dz_m)
-    loss_db = 20 * np.log10(np.e) * (np.arange(1, 15) * dz_m / 2) ** 2 / (2 * width_m ** 2)
-
-    def plan_of(x_m, y_m):
-        return SearchPlan.uniform(len(x_m), 4, loss_db, margin_db=1.0)
-    index = np.arange(n_side * n_side, dtype=float).reshape(n_side, n_side)     # x: the profile's pixel index
-    pixels = np.ones((n_side, n_side), dtype=bool)
-    args = (evaluate, pixels, index, index * 0, z_m, plan_of, 14.0, 4, 6, 6.0, 0.005)
-    roi, n_all = bp_search.coarse_roi(*args)
-    inherited, n_inherited = bp_search.coarse_roi(*args, inherit_margin_db=1.0)
-    same(inherited.pixels, roi.pixels)
-    assert (inherited.z_min_m, inherited.z_max_m) == (roi.z_min_m, roi.z_max_m)
-    assert roi.pixels.any() and not roi.pixels.all() and n_inherited < 0.7 * n_all
-
-
 # ---- physics with every skip on ---------------------------------------------------------------------------------
 
 
