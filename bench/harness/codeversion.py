@@ -22,7 +22,7 @@ import hashlib
 import json
 import os
 import re
-from importlib.metadata import version
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]
@@ -81,17 +81,31 @@ def compute_modules(entry: str = COMPUTE_ENTRY, root: Path = PACKAGE_ROOT) -> di
     return found
 
 
+def package_version(root: Path = PACKAGE_ROOT) -> str:
+    """The installed package's version; from a checkout that was never installed (sources on PYTHONPATH), the
+    version its pyproject.toml declares, or "0+unknown" without one."""
+    try:
+        return version("mm2fsk-bench")
+    except PackageNotFoundError:
+        import tomllib
+
+        try:
+            return str(tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"])
+        except (OSError, KeyError, tomllib.TOMLDecodeError):
+            return "0+unknown"
+
+
 def _compute_version(root: Path = PACKAGE_ROOT) -> str:
     digest = hashlib.sha256()
     for path in sorted(compute_modules(root=root).values()):
         digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
-    return f"{version('mm2fsk-bench')}+{digest.hexdigest()[:12]}"
+    return f"{package_version(root)}+{digest.hexdigest()[:12]}"
 
 
 def sources_key(root: Path = PACKAGE_ROOT) -> str:
     """sha256 of every .py file of the packages under `root` (relative path and bytes) and the package version: what
     `compute_modules` and so the code version can depend on."""
-    digest = hashlib.sha256(version("mm2fsk-bench").encode() + b"\0")
+    digest = hashlib.sha256(package_version(root).encode() + b"\0")
     for path in sorted(p for package in PACKAGES for p in (root / package).rglob("*.py")):
         digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return digest.hexdigest()

@@ -77,14 +77,15 @@ def report(root: Path, table: str | None, depth_errors: bool = False) -> pd.Data
     from bench.report import plots, tables
 
     rows = merge(root)
-    summary = tables.summarise(rows)
-    if table is not None:
-        text = tables.caption(table, rows, summary=summary)
-        (root / f"{table}.md").write_text(f"{text}\n\n{tables.summary_markdown(summary)}\n")
-        tables.write_csv(summary, root / f"{table}.csv", tables.paired_comparisons(rows))
-        (root / f"{table}.tex").write_text(tables.summary_latex(summary, text))
-        runtime_plot(root, table, summary)
-    if table is not None and depth_errors:
+    if table is None:
+        return tables.summarise(rows)
+    summary, pairs = tables.summary_and_pairs(rows)     # scored once for both
+    text = tables.caption(table, rows, summary=summary)
+    (root / f"{table}.md").write_text(f"{text}\n\n{tables.summary_markdown(summary)}\n")
+    tables.write_csv(summary, root / f"{table}.csv", pairs)
+    (root / f"{table}.tex").write_text(tables.summary_latex(summary, text))
+    runtime_plot(root, table, summary)
+    if depth_errors:
         runs = [(tables.job_label(p.parent / "results.csv"), p) for p in job_files(root, "arrays.h5")]
         plots.depth_error_maps(runs, root / "depth_errors")
     return summary

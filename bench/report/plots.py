@@ -1,6 +1,8 @@
 """Figures of a sweep: runtime against error with the Pareto front, and per-capture signed depth-error maps (PNG)."""
 from __future__ import annotations
 
+import os
+import threading
 from pathlib import Path
 
 import matplotlib
@@ -71,20 +73,20 @@ def runtime_vs_error(summary: pd.DataFrame, path: Path, title: str) -> Path:
     return path
 
 
-def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path) -> list[Path]:
+def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path, workers: int | None = None) -> list[Path]:
     """One PNG per capture: the signed depth error (depth - ground truth, cm) of every run side by side.
 
     Diverging colours (red: the radar put the surface behind the truth, blue: in front; a wrap shows its
     direction), saturating at +-ERROR_LIMIT_CM; "no depth" in grey, depth where the ground truth has no surface in
     black (bench.report.pictures). runs: (label, arrays.h5 of the run) pairs; every capture found gets a figure,
-    redrawn only when its cells' labels or arrays (or this code) changed (bench.report.keyed).
+    redrawn only when its cells' labels or arrays (or this code) changed (bench.report.keyed). The figures to
+    draw are drawn by `workers` forked processes (default: one per core; ~2 s each for Table III's 14 cells), where
+    this process may fork (`_fork_safe`), else here one after another: the same files either way.
     """
     from bench.report import keyed, pictures
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    error_map = plt.get_cmap("RdBu_r").with_extremes(bad=pictures.NO_DEPTH_COLOUR)
-    overlay_map = ListedColormap([pictures.NO_DEPTH_COLOUR, pictures.NO_TRUTH_COLOUR])
-    paths, keys = [], keyed.Keys(out_dir)
+    paths, keys, stale = [], keyed.Keys(out_dir), {}
     for stem in pictures.capture_stems([h5_path for _, h5_path in runs]):
         cells = [(label, arrays) for label, h5_path in runs
                  if (arrays := pictures.read_arrays(h5_path, stem)) is not None]
@@ -92,35 +94,68 @@ def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path) -> list[Path]:
         key = keyed.digest(Path(__file__), *(part for label, a in cells
                                              for part in (label, a.depth_m, a.gt_depth_m, a.x_m, a.y_m)))
         paths.append(path)
-        if keys.fresh(stem, key, [path]):
-            continue
-        xlim, ylim = pictures.crop_cm([arrays for _, arrays in cells])
-        ncols = min(len(cells), 7)
-        nrows = -(-len(cells) // ncols)
-        aspect = (ylim[1] - ylim[0]) / (xlim[1] - xlim[0])
-        fig, axes = plt.subplots(nrows, ncols, figsize=(2.4 * ncols + 1.6, (2.4 * aspect + 0.7) * nrows + 1.3),
-                                 squeeze=False, layout="constrained")
-        for ax in axes.flat[len(cells):]:
-            ax.set_axis_off()
-        for ax, (label, arrays) in zip(axes.flat, cells, strict=False):
-            image = ax.imshow(pictures.signed_error_cm(arrays), extent=arrays.extent_cm, cmap=error_map,
-                              vmin=-ERROR_LIMIT_CM, vmax=ERROR_LIMIT_CM, interpolation="nearest")
-            ax.imshow(pictures.no_error_categories(arrays), extent=arrays.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
-                      interpolation="nearest")
-            ax.set(xlim=xlim, ylim=ylim, xlabel="x (cm)", ylabel="y (cm)")
-            ax.set_title(label, fontsize=8)
-            ax.tick_params(labelsize=7)
-            ax.xaxis.label.set_fontsize(7)
-            ax.yaxis.label.set_fontsize(7)
-        fig.colorbar(image, ax=axes, shrink=0.9, extend="both",
-                     label=f"depth - ground truth (cm), saturates at ±{ERROR_LIMIT_CM:g}")
-        fig.legend(handles=[Patch(color=pictures.NO_DEPTH_COLOUR, label="no depth"),
-                            Patch(color=pictures.NO_TRUTH_COLOUR, label="depth, no ground truth"),
-                            Patch(color=error_map(1.0), label="behind the surface"),
-                            Patch(color=error_map(0.0), label="in front of it")],
-                   loc="outside lower center", ncols=4, fontsize=7, frameon=False)
-        fig.suptitle(f"{stem}: signed depth error per method (radar space, x and y in cm)", fontsize=9)
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        keys.record(stem, key)
+        if not keys.fresh(stem, key, [path]):
+            stale[stem] = key
+    workers = min(len(stale), workers or _cores())
+    if workers > 1 and _fork_safe():
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+            futures = {stem: pool.submit(_depth_error_map, runs, stem, out_dir / f"{stem}.png") for stem in stale}
+            for stem, future in futures.items():
+                future.result()
+                keys.record(stem, stale[stem])
+    else:
+        for stem, key in stale.items():
+            _depth_error_map(runs, stem, out_dir / f"{stem}.png")
+            keys.record(stem, key)
     return paths
+
+
+def _cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def _fork_safe() -> bool:
+    """Whether this process may fork workers: where fork exists and only this thread runs (a lock another thread
+    holds at the fork would stay held in the child)."""
+    return hasattr(os, "fork") and threading.active_count() == 1
+
+
+def _depth_error_map(runs: list[tuple[str, Path]], stem: str, path: Path) -> None:
+    """The figure of capture `stem` (depth_error_maps) into `path`."""
+    from bench.report import pictures
+
+    error_map = plt.get_cmap("RdBu_r").with_extremes(bad=pictures.NO_DEPTH_COLOUR)
+    overlay_map = ListedColormap([pictures.NO_DEPTH_COLOUR, pictures.NO_TRUTH_COLOUR])
+    cells = [(label, arrays) for label, h5_path in runs
+             if (arrays := pictures.read_arrays(h5_path, stem)) is not None]
+    xlim, ylim = pictures.crop_cm([arrays for _, arrays in cells])
+    ncols = min(len(cells), 7)
+    nrows = -(-len(cells) // ncols)
+    aspect = (ylim[1] - ylim[0]) / (xlim[1] - xlim[0])
+    fig, axes = plt.subplots(nrows, ncols, figsize=(2.4 * ncols + 1.6, (2.4 * aspect + 0.7) * nrows + 1.3),
+                             squeeze=False, layout="constrained")
+    for ax in axes.flat[len(cells):]:
+        ax.set_axis_off()
+    for ax, (label, arrays) in zip(axes.flat, cells, strict=False):
+        image = ax.imshow(pictures.signed_error_cm(arrays), extent=arrays.extent_cm, cmap=error_map,
+                          vmin=-ERROR_LIMIT_CM, vmax=ERROR_LIMIT_CM, interpolation="nearest")
+        ax.imshow(pictures.no_error_categories(arrays), extent=arrays.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
+                  interpolation="nearest")
+        ax.set(xlim=xlim, ylim=ylim, xlabel="x (cm)", ylabel="y (cm)")
+        ax.set_title(label, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.xaxis.label.set_fontsize(7)
+        ax.yaxis.label.set_fontsize(7)
+    fig.colorbar(image, ax=axes, shrink=0.9, extend="both",
+                 label=f"depth - ground truth (cm), saturates at ±{ERROR_LIMIT_CM:g}")
+    fig.legend(handles=[Patch(color=pictures.NO_DEPTH_COLOUR, label="no depth"),
+                        Patch(color=pictures.NO_TRUTH_COLOUR, label="depth, no ground truth"),
+                        Patch(color=error_map(1.0), label="behind the surface"),
+                        Patch(color=error_map(0.0), label="in front of it")],
+               loc="outside lower center", ncols=4, fontsize=7, frameon=False)
+    fig.suptitle(f"{stem}: signed depth error per method (radar space, x and y in cm)", fontsize=9)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -216,6 +216,13 @@ PAIR_COLUMNS = ["metric", "a", "b", "captures", "a_better", "b_better", "mean_di
 def paired_comparisons(rows: pd.DataFrame, floor_pct: float = scoring.COVERAGE_FLOOR_PCT) -> pd.DataFrame:
     """Every pair of rows per metric on the metric's common captures: `metric`, `a`, `b`, `captures`, `a_better`,
     `b_better` (captures where each is lower), `mean_diff_cm` (a - b) and the permutation test's `p`."""
+    return summary_and_pairs(rows, floor_pct)[1]
+
+
+def summary_and_pairs(rows: pd.DataFrame, floor_pct: float = scoring.COVERAGE_FLOOR_PCT
+                      ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(`summarise`, `paired_comparisons`) of the rows, scored once (the scoring and the bootstrap intervals are
+    most of either's cost)."""
     _, summary, matrices, common = _scored(rows, floor_pct)
     lines = []
     for metric in METRICS_CM:
@@ -224,7 +231,7 @@ def paired_comparisons(rows: pd.DataFrame, floor_pct: float = scoring.COVERAGE_F
             result = uncertainty.paired(matrix.loc[i], matrix.loc[j])
             lines.append({"metric": metric, "a": a, "b": b, "captures": result.n, "a_better": result.a_better,
                           "b_better": result.b_better, "mean_diff_cm": result.mean_diff, "p": result.p_value})
-    return pd.DataFrame(lines, columns=PAIR_COLUMNS)
+    return summary, pd.DataFrame(lines, columns=PAIR_COLUMNS)
 
 
 def pair_of(pairs: pd.DataFrame, metric: str, a: str, b: str) -> tuple[int, int, int, float] | None:

@@ -33,6 +33,9 @@ from bench.synth.radar.frequency_nodes import interpolator
 
 RESEED_STEPS = 16       # exact phasors every 16 nodes bound the complex64 recursion error to ~1e-6
 BLOCK_ROWS = 2048       # rows per block: small enough that a block spans a few cm, large enough for BLAS
+CHUNK_ELEMENTS = 1 << 16   # elements per chunk of row_chunks: 512 kB of float64, a pass and its temporaries within a
+                           # core's L2 cache (a block's (192, ~2000) arrays are 6x that: passes over them ran 2-3x
+                           # slower, memory-bound); not smaller: each chunk's calls take the GIL the other threads want
 PARTIAL_SUMS = 2        # blocks alternate between two sums, one thread each: fixed, so results do not depend on
                         # the machine (the order of float32 additions is always the same)
 
@@ -41,15 +44,30 @@ PARTIAL_SUMS = 2        # blocks alternate between two sums, one thread each: fi
 Legs = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
+def row_chunks(n_rows: int, n_columns: int) -> list[slice]:
+    """Slices of rows holding about CHUNK_ELEMENTS elements each (at least one row): elementwise passes over a
+    (rows, columns) array done chunk by chunk stay in the core's cache (the same values: every element is computed
+    by the same operations)."""
+    step = max(1, CHUNK_ELEMENTS // max(1, n_columns))
+    return [slice(start, start + step) for start in range(0, n_rows, step)]
+
+
 def exact_phasors(path_m: np.ndarray, freq_hz) -> np.ndarray:
     """exp(-j 2 pi f path / c) as complex64: phase reduced modulo one cycle in float64, then float32 cos/sin."""
-    cycles = path_m * (np.asarray(freq_hz) / C_M_PER_S)
-    cycles -= np.rint(cycles)
-    angle = (cycles * (-2.0 * np.pi)).astype(np.float32)
-    parts = np.empty(angle.shape + (2,), dtype=np.float32)
-    np.cos(angle, out=parts[..., 0])
-    np.sin(angle, out=parts[..., 1])
-    return parts.view(np.complex64)[..., 0]
+    scale = np.asarray(freq_hz) / C_M_PER_S
+    shape = np.broadcast_shapes(np.shape(path_m), scale.shape)
+    out = np.empty(shape, dtype=np.complex64)
+    table = (int(np.prod(shape[:1])), int(np.prod(shape[1:])))     # (first axis, the rest); a scalar as (1, 1)
+    path_m, scale = (np.broadcast_to(a, shape).reshape(table) for a in (path_m, scale))
+    flat = out.reshape(table)
+    for rows in row_chunks(*path_m.shape):
+        cycles = path_m[rows] * scale[rows]
+        cycles -= np.rint(cycles)
+        cycles *= -2.0 * np.pi
+        angle = cycles.astype(np.float32)
+        flat[rows].real = np.cos(angle)
+        flat[rows].imag = np.sin(angle)
+    return out
 
 
 def compact_blocks(positions: np.ndarray, block_rows: int = BLOCK_ROWS) -> list[np.ndarray]:
@@ -115,29 +133,34 @@ def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: n
     blocks = compact_blocks(np.asarray(positions, dtype=np.float64), BLOCK_ROWS)
     pool = _block_pool()
 
-    def block(rows: np.ndarray) -> np.ndarray | None:
-        return block_sum(*legs(rows), freqs_hz, n_rx)
+    def block(rows: np.ndarray, into: np.ndarray | None) -> np.ndarray | None:
+        return block_sum(*legs(rows), freqs_hz, n_rx, into)
 
     window = 2 * _threads()      # blocks in flight (each result is F x n_rx x n_tx complex64: ~9 MB)
     pending: collections.deque = collections.deque()
-    with single_threaded_blas():
+    spare: list[np.ndarray] = []      # results already added, written over by later blocks: fresh ~9 MB arrays
+    with single_threaded_blas():      # cost page faults (a fifth of the generator's system time)
         for number, rows in enumerate(blocks):
-            pending.append((number, pool.submit(block, rows)))
+            pending.append((number, pool.submit(block, rows, spare.pop() if spare else None)))
             while len(pending) >= window or (number == len(blocks) - 1 and pending):
                 done, future = pending.popleft()
                 contribution = future.result()
                 if contribution is not None:
                     outs[done % PARTIAL_SUMS] += contribution
+                    if contribution.shape == outs[0].shape:
+                        spare.append(contribution)
     out = outs[0]
     for other in outs[1:]:
         out += other
     return np.ascontiguousarray(out.transpose(1, 2, 0))
 
 
-def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx: int) -> np.ndarray | None:
+def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx: int,
+              into: np.ndarray | None = None) -> np.ndarray | None:
     """One block's sum (F, n_rx, n_tx) complex64 (path_m, weight: (n_rx + n_tx, k), receive legs first; None for
-    no rows): at the node frequencies, then interpolated to every frequency. Added to a sum it gives what adding
-    node by node gave (0 + x is x)."""
+    no rows): at the node frequencies, then interpolated to every frequency, into `into` (a C-contiguous
+    complex64 array of that shape, overwritten) where given. Added to a sum it gives what adding node by node gave
+    (0 + x is x)."""
     if path_m.shape[1] == 0:
         return None
     low, high = path_m.min(axis=1), path_m.max(axis=1)
@@ -162,7 +185,9 @@ def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx
         np.matmul(phasor[:n_rx], phasor[n_rx:].T, out=at_nodes[n])     # rows: receive legs, then transmit legs
     if fit is None:
         return at_nodes
-    every = (fit @ at_nodes.reshape(len(nodes_hz), -1)).reshape((len(freqs_hz), *at_nodes.shape[1:]))
+    shape = (len(freqs_hz), *at_nodes.shape[1:])
+    every = np.empty(shape, dtype=np.complex64) if into is None else into
+    np.matmul(fit, at_nodes.reshape(len(nodes_hz), -1), out=every.reshape(len(freqs_hz), -1))
     centre_phasor = exact_phasors(centre[None, :], freqs_hz[:, None])          # the centre path, factored out
     every *= centre_phasor[:, :n_rx, None]
     every *= centre_phasor[:, None, n_rx:]

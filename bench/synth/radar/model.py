@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from bench.synth.config import C_M_PER_S, SynthConfig
-from bench.synth.radar.leg_sum import leg_sum
+from bench.synth.radar.leg_sum import leg_sum, row_chunks
 from bench.synth.sampling import SurfaceSamples
 
 
@@ -37,46 +37,70 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
         cos_limit = np.where(limit_rad < np.pi, np.cos(np.minimum(limit_rad, np.pi)), -np.inf)
 
     def legs(rows: np.ndarray):
+        # every pass below runs over cache-sized chunks of antennas (row_chunks); all gains in float32 (the weights
+        # are complex64), the values those of whole-array passes
         points = points_m[rows]
         dist_m = leg_distances(points, antennas_m)                               # (n_rx + n_tx, k)
-        weight = np.reciprocal(dist_m, dtype=np.float32)   # path loss; the gains of leg_gains from dot products, all
-        if normals is not None:                             # in float32: the weights are complex64
+        chunks = row_chunks(*dist_m.shape)
+        weight = np.empty(dist_m.shape, dtype=np.float32)       # path loss, times the gains of leg_gains
+        for r in chunks:
+            np.reciprocal(dist_m[r], dtype=np.float32, out=weight[r])
+        gain = None
+        if normals is not None:            # the lobe from dot products: cos = (a.n - p.n) / |a - p|
             facet = normals[rows]
-            cos_leg = (antennas_m @ facet.T - np.einsum("kc,kc->k", points, facet)).astype(np.float32)
-            cos_leg *= weight
+            dot, along = antennas_m @ facet.T, np.einsum("kc,kc->k", points, facet)
+            gain = np.empty(dist_m.shape, dtype=np.float32)
+            for r in chunks:
+                dot[r] -= along
+                gain[r] = dot[r]
+                gain[r] *= weight[r]
             if min_lobe_gain > 0:
-                audible = cos_leg.max(axis=0) >= cos_limit[rows]
-                rows, points, dist_m = rows[audible], points[audible], dist_m[:, audible]
-                weight, cos_leg = weight[:, audible], cos_leg[:, audible]
-            angle = np.arccos(np.clip(cos_leg, -1.0, 1.0, out=cos_leg))
-            angle /= lobe_rad[rows].astype(np.float32)
-            angle *= angle
-            angle *= np.float32(-0.5)
-            gain = np.exp(angle)
-        else:
-            gain = None
+                audible = gain.max(axis=0) >= cos_limit[rows]
+                if not audible.all():
+                    rows, points, dist_m = rows[audible], points[audible], dist_m[:, audible]
+                    weight, gain = weight[:, audible], gain[:, audible]
+                    chunks = row_chunks(*dist_m.shape)
+            lobe = lobe_rad[rows].astype(np.float32)
+            for r in chunks:           # exp(-(theta / lobe)^2 / 2)
+                angle = gain[r]
+                np.arccos(np.clip(angle, -1.0, 1.0, out=angle), out=angle)
+                angle /= lobe
+                angle *= angle
+                angle *= np.float32(-0.5)
+                np.exp(angle, out=angle)
         if element_exponent:
-            element = (points[:, 2] - antennas_m[:, 2:]).astype(np.float32)
-            element *= weight
-            np.clip(element, 0.0, 1.0, out=element)
-            if element_exponent != 1:
-                element **= np.float32(element_exponent)
-            gain = element if gain is None else gain * element
-        if gain is not None:
-            weight *= gain
-        weight = weight.astype(np.complex64)
-        weight[:n_rx] *= amplitudes[rows].astype(np.complex64)
-        return dist_m, weight
+            if gain is None:
+                gain = np.ones(dist_m.shape, dtype=np.float32)
+            for r in chunks:           # cos(angle off +z)^q = ((p_z - a_z) / |p - a|)^q
+                element = (points[:, 2] - antennas_m[r, 2:]).astype(np.float32)
+                element *= weight[r]
+                np.clip(element, 0.0, 1.0, out=element)
+                if element_exponent != 1:
+                    element **= np.float32(element_exponent)
+                gain[r] *= element
+        complex_weight = np.empty(dist_m.shape, dtype=np.complex64)
+        for r in chunks:
+            if gain is not None:
+                weight[r] *= gain[r]
+            complex_weight[r] = weight[r]
+        complex_weight[:n_rx] *= amplitudes[rows].astype(np.complex64)
+        return dist_m, complex_weight
 
     return leg_sum(legs, points_m, n_rx, len(tx_m), freqs_hz)
 
 
 def leg_distances(points_m: np.ndarray, antennas_m: np.ndarray) -> np.ndarray:
     """|p_k - a_e| (E, K) m as sqrt(|a|^2 + |p|^2 - 2 a.p): a matrix product; in float64 the cancellation costs
-    ~1e-16 m at these ranges (a phase error ~1e-13 rad)."""
-    squared = (np.einsum("ec,ec->e", antennas_m, antennas_m)[:, None] + np.einsum("kc,kc->k", points_m, points_m)
-               - 2.0 * (antennas_m @ points_m.T))
-    return np.sqrt(np.maximum(squared, 0.0))
+    ~1e-16 m at these ranges (a phase error ~1e-13 rad). The rest in place, in cache-sized chunks (row_chunks)."""
+    distance = antennas_m @ points_m.T
+    antenna_sq, point_sq = np.einsum("ec,ec->e", antennas_m, antennas_m), np.einsum("kc,kc->k", points_m, points_m)
+    for rows in row_chunks(*distance.shape):
+        cross = distance[rows]
+        cross *= 2.0
+        np.subtract(np.add.outer(antenna_sq[rows], point_sq), cross, out=cross)
+        np.maximum(cross, 0.0, out=cross)
+        np.sqrt(cross, out=cross)
+    return distance
 
 
 def leg_gains(points_m: np.ndarray, antennas_m: np.ndarray, normals: np.ndarray | None = None,

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.synth.meshes import indexed
-from bench.synth.radar.leg_sum import leg_sum
+from bench.synth.radar.leg_sum import leg_sum, row_chunks
 from bench.synth.radar.model import leg_distances
 from bench.synth.sampling import SurfaceSamples
 
@@ -105,17 +105,29 @@ def _audible(pairs: BouncePairs, antennas_m: np.ndarray) -> BouncePairs:
 
 
 def _legs(points_m: np.ndarray, antennas_m: np.ndarray, element_exponent: float) -> tuple[np.ndarray, np.ndarray]:
-    """Distances (E, K) m and element-pattern gains (E, K) of the legs point -> antenna."""
+    """Distances (E, K) m and element-pattern gains (E, K) of the legs point -> antenna (in cache-sized chunks)."""
     distance = leg_distances(points_m, antennas_m)
     if not element_exponent:
         return distance, np.ones_like(distance)
-    return distance, np.clip((points_m[:, 2] - antennas_m[:, 2:]) / distance, 0.0, 1.0) ** element_exponent
+    element = np.empty_like(distance)
+    for r in row_chunks(*distance.shape):
+        np.subtract(points_m[:, 2], antennas_m[r, 2:], out=element[r])
+        element[r] /= distance[r]
+        np.clip(element[r], 0.0, 1.0, out=element[r])
+        if element_exponent != 1:           # x ** 1 is x
+            element[r] **= element_exponent
+    return distance, element
 
 
 def _first_leg(pairs: BouncePairs, rows: np.ndarray, antennas_m: np.ndarray, element_exponent: float):
     """Path (E, k) m and weight (E, k) complex64 of the leg antenna -> p1 -> p2 (the hop rides on p1's leg)."""
     distance, element = _legs(pairs.first_m[rows], antennas_m, element_exponent)
-    return distance + pairs.hop_m[rows], (element / distance).astype(np.complex64)
+    weight = np.empty(distance.shape, dtype=np.complex64)
+    for r in row_chunks(*distance.shape):
+        element[r] /= distance[r]
+        weight[r] = element[r]
+        distance[r] += pairs.hop_m[rows]
+    return distance, weight
 
 
 def _second_leg(pairs: BouncePairs, rows: np.ndarray, antennas_m: np.ndarray, element_exponent: float):
@@ -123,9 +135,24 @@ def _second_leg(pairs: BouncePairs, rows: np.ndarray, antennas_m: np.ndarray, el
     doubly reflected ray and the pair's amplitude."""
     second, outgoing = pairs.second_m[rows], pairs.outgoing[rows]
     distance, element = _legs(second, antennas_m, element_exponent)
-    cos_lobe = (antennas_m @ outgoing.T - np.einsum("kc,kc->k", second, outgoing)) / distance
-    lobe = np.exp(-0.5 * (np.arccos(np.clip(cos_lobe, -1.0, 1.0)) / pairs.lobe_rad[rows]) ** 2)
-    return distance, (element * lobe / distance * pairs.amplitude[rows]).astype(np.complex64)
+    dot, along = antennas_m @ outgoing.T, np.einsum("kc,kc->k", second, outgoing)
+    lobe_rad, amplitude = pairs.lobe_rad[rows], pairs.amplitude[rows]
+    weight = np.empty(distance.shape, dtype=np.complex64)
+    for r in row_chunks(*distance.shape):
+        lobe = dot[r]                   # cos = (a.o - p.o) / |a - p|, then exp(-(theta / lobe)^2 / 2)
+        lobe -= along
+        lobe /= distance[r]
+        np.arccos(np.clip(lobe, -1.0, 1.0, out=lobe), out=lobe)
+        lobe /= lobe_rad
+        lobe **= 2
+        lobe *= -0.5
+        np.exp(lobe, out=lobe)
+        gain = element[r]               # element * lobe / distance * amplitude
+        gain *= lobe
+        gain /= distance[r]
+        gain *= amplitude
+        weight[r] = gain
+    return distance, weight
 
 
 def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs_hz: np.ndarray,

@@ -471,6 +471,24 @@ def test_the_cached_code_version_is_the_computed_one_and_any_source_edit_compute
     assert codeversion.cached_version(root, unwritable / "code_version.json") == second     # no cache: computed
 
 
+def test_a_checkout_that_was_never_installed_still_has_a_code_version(monkeypatch, tmp_path):
+    """Sources on PYTHONPATH without the package's metadata (a clone used in place): the version pyproject.toml
+    declares, or 0+unknown; never a PackageNotFoundError traceback out of a sweep."""
+    from importlib.metadata import PackageNotFoundError
+
+    from bench.harness import codeversion
+
+    def not_installed(name):
+        raise PackageNotFoundError(name)
+
+    monkeypatch.setattr(codeversion, "version", not_installed)
+    (tmp_path / "pyproject.toml").write_text('[project]\nname = "mm2fsk-bench"\nversion = "9.8.7"\n')
+    assert codeversion.package_version(tmp_path) == "9.8.7"
+    assert codeversion.package_version(tmp_path / "nowhere") == "0+unknown"
+    assert codeversion.package_version().count(".") == 2           # this checkout's pyproject.toml
+    assert codeversion.sources_key(tmp_path)                        # the cache key is made without the metadata
+
+
 def test_the_code_versions_cache_file_without_a_home_or_with_a_relative_cache_home(monkeypatch, tmp_path):
     from pathlib import Path
 

@@ -116,6 +116,18 @@ def test_one_failed_cell_leaves_its_capture_out_of_every_rows_p_and_keeps_the_ro
     assert line.loc["MM-2FSK Δ10.0", "P_cm_vs"] == "2FSK Δ0.5" and line.loc["MM-2FSK Δ10.0", "P_cm_worse"] == 2
 
 
+def test_summary_and_pairs_scored_once_are_what_summarise_and_paired_comparisons_give():
+    from bench.report.tables import paired_comparisons, summarise, summary_and_pairs
+
+    rows = _rows([("mm2fsk", "d10", "realsense", 0.5), ("2fsk", "d05", "none", 0.1), ("bp", "d05", "none", 0.7)],
+                 captures=("01_plate", "03_sphere", "05_steps"))
+    rows.loc[(rows.method == "bp") & (rows.object == "03_sphere"), "P_cm"] = 3.0
+    summary, pairs = summary_and_pairs(rows)
+    pd.testing.assert_frame_equal(summary, summarise(rows))
+    pd.testing.assert_frame_equal(pairs, paired_comparisons(rows))
+    assert len(pairs) == 3 * 4 and summary.P_cm_low.notna().all()       # 3 pairs of rows x 4 metrics; intervals
+
+
 def test_a_capture_below_the_coverage_floor_is_a_failure():
     from bench.report.tables import summarise
 

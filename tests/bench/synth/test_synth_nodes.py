@@ -126,3 +126,46 @@ def test_multipath_rows_match_float64_sum(monkeypatch):
                  + np.einsum("krf,ktf->rtf", legs(first, rx_m, pairs.hop_m, False), legs(second, tx_m, zero, True)))
     assert max(counts) < len(FREQS_HZ)
     assert np.abs(frame - reference).max() < TOLERANCE * np.abs(reference).max()
+
+
+def _whole_array_phasors(path_m, freq_hz):
+    """exact_phasors as whole-array passes (what it computed before its passes ran in cache-sized chunks)."""
+    cycles = path_m * (np.asarray(freq_hz) / C_M_PER_S)
+    cycles -= np.rint(cycles)
+    angle = (cycles * (-2.0 * np.pi)).astype(np.float32)
+    parts = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    return parts.view(np.complex64)[..., 0]
+
+
+@pytest.mark.parametrize(("path_shape", "freq_shape"), [((192, 1500), ()), ((1, 192), (128, 1)), ((), ()),
+                                                         ((192, 0), ()), ((3, 5, 7), (5, 1))])
+def test_chunked_passes_give_the_whole_array_values_bit_for_bit(path_shape, freq_shape, monkeypatch):
+    """The generator's captures stay byte-identical only if chunking changes no value: exact phasors (broadcast
+    shapes, a scalar, an empty block) and leg distances against whole-array passes on fresh random inputs, with
+    chunks far smaller than the arrays."""
+    from bench.synth.radar.model import leg_distances
+
+    monkeypatch.setattr(leg_sum, "CHUNK_ELEMENTS", 100)
+    rng = np.random.default_rng()
+    path_m = rng.uniform(0.2, 1.5, path_shape)
+    freq_hz = rng.uniform(72e9, 82e9, freq_shape)
+    found = leg_sum.exact_phasors(path_m, freq_hz)
+    expected = _whole_array_phasors(path_m, freq_hz)
+    assert found.shape == expected.shape and found.dtype == np.complex64
+    assert np.array_equal(found.view(np.uint64), expected.view(np.uint64))
+    points_m, antennas_m = rng.uniform(-0.2, 0.4, (700, 3)), rng.uniform(-0.07, 0.07, (192, 3))
+    squared = (np.einsum("ec,ec->e", antennas_m, antennas_m)[:, None] + np.einsum("kc,kc->k", points_m, points_m)
+               - 2.0 * (antennas_m @ points_m.T))
+    assert np.array_equal(leg_distances(points_m, antennas_m), np.sqrt(np.maximum(squared, 0.0)))
+
+
+def test_a_block_summed_into_a_used_buffer_is_the_block_summed_fresh():
+    """leg_sum hands blocks the results it has already added, to be written over: the values must be those of a
+    fresh array whatever the buffer held."""
+    rng = np.random.default_rng()
+    path_m = 0.6 + rng.uniform(-0.004, 0.004, (12, 300))              # 6 receive, 6 transmit legs, 300 rows
+    weight = (rng.normal(size=path_m.shape) + 1j * rng.normal(size=path_m.shape)).astype(np.complex64)
+    fresh = leg_sum.block_sum(path_m, weight, FREQS_HZ, 6)
+    used = (rng.normal(size=fresh.shape) + 1j * rng.normal(size=fresh.shape)).astype(np.complex64)
+    found = leg_sum.block_sum(path_m, weight, FREQS_HZ, 6, into=used)
+    assert found is used and np.array_equal(found.view(np.uint64), fresh.view(np.uint64))
