@@ -181,7 +181,7 @@ class Lattice:
     rows: np.ndarray
     cols: np.ndarray
     step: int
-    margin_db: float = 1.0
+    margin_db: float
 
     def corners(self) -> tuple[np.ndarray, np.ndarray]:
         """(N, 4) indices of each pixel's enclosing lattice pixels (-1: not in the set) and (N,) bool: the pixel
@@ -277,8 +277,9 @@ class _Samples:
             union |= marked[corners[inherit, j]]
         for s in np.unique(step[inherit]):
             sel = np.flatnonzero(step[inherit] == s)
-            p, c = np.nonzero(_near_coarse(union[sel], _coarse_indices(n_z, int(s))))     # pixel-major
-            self.run(_coarse_indices(n_z, int(s))[c], inherit[sel][p])
+            k_c = _coarse_indices(n_z, int(s))
+            p, c = np.nonzero(_near_coarse(union[sel], k_c))                    # pixel-major
+            self.run(k_c[c], inherit[sel][p])
 
 
 def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray, plan: SearchPlan,

@@ -280,7 +280,7 @@ def test_pixel_lattice_inherits_the_peaks_of_laterally_smooth_profiles(record_pr
     loss_db = 20 * np.log10(np.e) * (np.arange(1, step + 1) * dz_m / 2) ** 2 / (2 * width_m ** 2)
     plan = SearchPlan.uniform(len(rows), step, loss_db, margin_db=loss_db[0])
     x = np.arange(len(rows), dtype=float)                     # the pixel index (the profiles' lookup)
-    lattice = bp_search.Lattice(rows, cols, 2)
+    lattice = bp_search.Lattice(rows, cols, 2, margin_db=1.0)
     full, fast, (full_m, fast_m) = _search_pair(evaluate, x, x * 0, z_m, plan, lattice=lattice, local_max=True)
     same(np.isfinite(full_m), np.isfinite(fast_m))
     np.testing.assert_array_equal(fast_m, full_m)
