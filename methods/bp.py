@@ -11,9 +11,10 @@ and pixels without a prior stay NaN.
 
 Region of interest and skips (methods.skips.roi, methods.skips.settings): with an ROI, only its pixels and depths are
 evaluated (the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device,
-through the point kernels) and, on the CPU with many frequencies, on range-compressed profiles
-(methods.skips.bp_search, methods.backends.cpu_range); with many frequencies on CUDA the coarse ROI's pass and the
-whole search run on the device (`Backend.coarse_peaks`, `Backend.search_depth`: same rules and results). With no ROI
+through the point kernels; on the host with local-maximum candidates and a 2 mm pixel lattice) and, on the CPU with
+many frequencies, on range-compressed profiles (methods.skips.bp_search, methods.backends.cpu_range); with many
+frequencies on CUDA the coarse ROI's pass and the whole search run on the device (`Backend.coarse_peaks`,
+`Backend.search_depth`: the same rules as the host's without its two shortcuts, and results). With no ROI
 and no skip (`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
 from __future__ import annotations
@@ -102,6 +103,20 @@ def _plan_of(freqs_hz, antennas, z_m, dz_m, skips: SkipSettings):
                                                   skips.candidate_margin_db)
 
 
+def _host_search_options(skips: SkipSettings, grid, pixels: np.ndarray) -> dict:
+    """`bp_search.search_depth`'s shortcuts as `skips` set them (only with `bp_coarse_to_fine`): the pixel lattice
+    over the searched `pixels` (ny, nx) bool, and local-maximum candidates."""
+    if not skips.bp_coarse_to_fine:
+        return {}
+    lattice = None
+    if skips.search_lattice_step_m > 0:
+        step_px = skips.lattice_px(pixel_pitch_m(grid), skips.search_lattice_step_m)[0]
+        if step_px > 1:
+            rows, cols = np.nonzero(pixels)                 # the order of x_img[pixels]
+            lattice = bp_search.Lattice(rows, cols, step_px, skips.search_lattice_margin_db)
+    return {"lattice": lattice, "local_max": skips.search_local_max}
+
+
 def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi: Roi, skips: SkipSettings,
                       threshold_db, backend, timer, extra: dict):
     """Depth and max projection (ny, nx) over the ROI's pixels and the depths z_m (z_outer, the grid's or the prior
@@ -148,7 +163,10 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                     hull_m)
                 found_depth = None if on_device is None else bp_search.SearchResult(*on_device)
                 if found_depth is None:
-                    found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges)
+                    options = _host_search_options(skips, grid, pixels)
+                    found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges,
+                                                         **options)
+                    extra["search_lattice_px"] = options["lattice"].step if options.get("lattice") else 1
                 depth_m[pixels], max_proj[pixels] = found_depth.depth_m, found_depth.max_projection
                 n_evaluated += found_depth.n_evaluated
     extra.update(roi_px=int(pixels.sum()), roi_z_m=(float(z_m[0]), float(z_m[-1])) if len(z_m) else None,

@@ -29,6 +29,19 @@ step with loss(step dz / 2) <= psf_max_loss_db at its distance from the axis, an
 candidate_margin_db (>= loss(dz / 2), tiny). Extended scenes can have peaks sharper than a point target's
 (interference); the margin covers that, and `bench.perf.correlate --section skips` measures it on the catalogue.
 
+Two measured shortcuts (options of `search_depth`; the condition above no longer guarantees the full grid's
+argmax with them, so `bench.perf skips` and docs/measurements/formation.md measure them against it):
+* local maxima only (`local_max`): a candidate must also be no smaller than the nearest evaluated samples on either
+  side in its pixel. On a lobe that is unimodal between evaluated samples the halving then brackets the lobe's
+  peak (the largest of c - h, c, c + h is within h of it) and a lobe's flank samples add nothing; two-frequency
+  profiles are smooth over a coarse step (their envelope varies over the depth of focus and the beat), so a
+  pixel's refinement costs ~2 samples per level and lobe instead of 2 per sample within the window.
+* pixel lattice (`Lattice`): only the pixels on a lattice of `step` pixels (and those not enclosed by four lattice
+  pixels of the set) evaluate every coarse sample; each other pixel evaluates the coarse samples within one coarse
+  step of its lattice corners' candidates (within the window + `margin_db`), and the refinement goes on from its
+  own values. The image is laterally smooth over the lattice (2 mm against a lateral resolution of ~4 mm at 30
+  cm), so a pixel's peak lies where its corners' peaks are.
+
 Filter-aware skip: a pixel is kept by the filter iff max_z |V| >= G 10^(-thr/20) with G the image maximum.
 Under the condition above, max_z |V| <= coarse_max 10^(window/20), and G >= G_coarse, so a pixel whose
 coarse maximum is below G_coarse 10^(-(thr + window)/20) cannot be kept: it is not refined, its depth is NaN
@@ -160,6 +173,57 @@ def plan_search(freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray, y
     return SearchPlan(step=step_by_radius[ring].astype(int), loss_curve_db=bracket[ring], margin_db=margin_db)
 
 
+@dataclass(frozen=True)
+class Lattice:
+    """The searched pixels' grid rows and columns (N,) and a lattice of `step` pixels (module doc): the others
+    inherit their coarse samples from the candidates of their lattice corners within the window + `margin_db`."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    step: int
+    margin_db: float
+
+    def corners(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 4) indices of each pixel's enclosing lattice pixels (-1: not in the set) and (N,) bool: the pixel
+        evaluates its own coarse samples (on the lattice, or a corner missing)."""
+        step, n = self.step, len(self.rows)
+        r0, c0 = self.rows // step * step, self.cols // step * step
+        r1 = np.where(self.rows % step > 0, r0 + step, r0)
+        c1 = np.where(self.cols % step > 0, c0 + step, c0)
+        index = np.full((int(r1.max(initial=0)) + 1, int(c1.max(initial=0)) + 1), -1, dtype=np.int64)
+        index[self.rows, self.cols] = np.arange(n)
+        corners = np.stack([index[r0, c0], index[r0, c1], index[r1, c0], index[r1, c1]], axis=1)
+        on_lattice = (self.rows % step == 0) & (self.cols % step == 0)
+        return corners, on_lattice | (corners < 0).any(axis=1)
+
+
+def _candidates(mag_t: np.ndarray, ratio: np.ndarray, local_max: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(pixel, depth index), pixel-major, of the evaluated samples of |V| `mag_t` (n, n_z) (-1: not evaluated) within
+    `ratio` (n,) of their pixel's maximum and, with `local_max`, no smaller than their pixel's nearest evaluated
+    samples on either side (module doc). Works on the evaluated samples only (~25 of a pixel's ~200 depths)."""
+    n_z = mag_t.shape[1]
+    flat = np.flatnonzero(mag_t >= 0)                                          # pixel-major, depth ascending
+    vals = mag_t.ravel()[flat]
+    pixel = flat // n_z
+    keep = vals >= (mag_t.max(axis=1) * ratio)[pixel]
+    if local_max:
+        other = pixel[1:] != pixel[:-1]                                        # a pixel's first / last sample
+        keep[1:] &= other | (vals[1:] >= vals[:-1])
+        keep[:-1] &= other | (vals[:-1] >= vals[1:])
+    flat = flat[keep]
+    return flat // n_z, flat % n_z
+
+
+def _near_coarse(marked: np.ndarray, k_c: np.ndarray) -> np.ndarray:
+    """(n, len(k_c)) bool: a depth of `marked` (n, n_z) lies between the coarse sample's neighbours k_c[i - 1] and
+    k_c[i + 1] (inclusive; within one coarse step)."""
+    segment = np.logical_or.reduceat(marked, k_c, axis=1)                      # [k_c[i], k_c[i + 1]), last: k_c[-1]
+    near = segment.copy()
+    near[:, 1:] |= segment[:, :-1]
+    near[:, :-1] |= marked[:, k_c[1:]]
+    return near
+
+
 def _coarse_indices(n_z: int, step: int) -> np.ndarray:
     k = np.arange(0, n_z, step)
     return k if k[-1] == n_z - 1 else np.append(k, n_z - 1)
@@ -180,23 +244,49 @@ class _Samples:
             self.mag[kb, pb] = np.abs(self.evaluate(points_m))
         self.count += len(k)
 
-    def run_coarse(self, step: np.ndarray) -> np.ndarray:
-        """Evaluate each pixel's coarse samples (its `step`); returns the coarse maximum per pixel (N,)."""
+    def run_coarse(self, step: np.ndarray, pixels: np.ndarray | None = None) -> np.ndarray:
+        """Evaluate the coarse samples (each pixel's `step` (N,)) of `pixels` (indices; default all); returns the
+        coarse maximum per pixel (N,) (0 for the others)."""
         n_z = len(self.z_m)
+        pixels = np.arange(len(step)) if pixels is None else pixels
         coarse_max = np.zeros(len(step), dtype=np.float32)
-        for s in np.unique(step):
-            pix = np.flatnonzero(step == s)
+        for s in np.unique(step[pixels]):
+            pix = pixels[step[pixels] == s]
             k_c = _coarse_indices(n_z, int(s))
             pp, kk = np.meshgrid(pix, k_c, indexing="ij")     # pixel-major: a batch's points lie close together
             self.run(kk.ravel(), pp.ravel())
             coarse_max[pix] = self.mag[np.ix_(k_c, pix)].max(axis=0)
         return coarse_max
 
+    def run_inherited(self, step: np.ndarray, window: np.ndarray, lattice: Lattice, local_max: bool) -> None:
+        """The coarse pass with a pixel lattice (module doc): every coarse sample of the lattice's pixels, then at
+        each other pixel its coarse samples within one coarse step of its corners' candidates (between the coarse
+        neighbours of the sample)."""
+        n_z = len(self.z_m)
+        corners, own = lattice.corners()
+        own_px = np.flatnonzero(own)
+        self.run_coarse(step, own_px)
+        inherit = np.flatnonzero(~own)
+        if len(inherit) == 0:
+            return
+        marked = np.zeros((len(step), n_z), dtype=bool)                       # (pixel, depth)
+        i, k = _candidates(self.mag.T[own_px], window[own_px] * 10.0 ** (-lattice.margin_db / 20.0), local_max)
+        marked[own_px[i], k] = True
+        union = marked[corners[inherit, 0]]
+        for j in range(1, corners.shape[1]):
+            union |= marked[corners[inherit, j]]
+        for s in np.unique(step[inherit]):
+            sel = np.flatnonzero(step[inherit] == s)
+            k_c = _coarse_indices(n_z, int(s))
+            p, c = np.nonzero(_near_coarse(union[sel], k_c))                    # pixel-major
+            self.run(k_c[c], inherit[sel][p])
+
 
 def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray, plan: SearchPlan,
-                 threshold_db: float | None, z_edges_are_grid_edges: tuple[bool, bool] = (True, True)
-                 ) -> SearchResult:
-    """Coarse-to-fine depth peak (module doc) of the pixels (x_m, y_m) (N,) over the equidistant depths z_m (n_z,).
+                 threshold_db: float | None, z_edges_are_grid_edges: tuple[bool, bool] = (True, True),
+                 lattice: Lattice | None = None, local_max: bool = False) -> SearchResult:
+    """Coarse-to-fine depth peak (module doc) of the pixels (x_m, y_m) (N,) over the equidistant depths z_m (n_z,);
+    `lattice` and `local_max`: the module doc's shortcuts (off: the search whose condition is proved there).
 
     Refinement halves the spacing level by level (ceil(s / 2)): around each candidate c of a level of spacing s,
     c +- ceil(s / 2) are evaluated, and the candidates of the new level are the evaluated samples within its
@@ -209,16 +299,20 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     dz_m = float(z_m[1] - z_m[0]) if n_z > 1 else 1.0
     spacing = np.minimum(plan.step, max(n_z - 1, 1))
     samples = _Samples(evaluate, x_m, y_m, z_m)
-    coarse_max = samples.run_coarse(spacing)
     window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)                     # (N,)
+    if lattice is not None and lattice.step > 1:
+        samples.run_inherited(spacing, window, lattice, local_max)
+        coarse_max = np.maximum(samples.mag.max(axis=0), 0.0)                  # unevaluated: -1
+    else:
+        coarse_max = samples.run_coarse(spacing)
     active = coarse_max > 0
     if threshold_db is not None and active.any():
         active &= coarse_max >= coarse_max.max() * 10.0 ** (-threshold_db / 20.0) * window
     spacing = np.where(active, spacing, 1)
     while (spacing > 1).any():
-        best = samples.mag.max(axis=0)                                         # unevaluated: -1, never the max
-        candidates = (samples.mag >= (best * window)[None]) & (spacing > 1)[None]
-        k, p = np.nonzero(candidates)
+        refining = np.flatnonzero(spacing > 1)
+        i, k = _candidates(samples.mag.T[refining], window[refining], local_max)
+        p = refining[i]
         spacing = np.where(spacing > 1, (spacing + 1) // 2, spacing)
         half = spacing[p]
         k_new = np.concatenate([k - half, k + half])

@@ -32,6 +32,7 @@ from methods.ops import range_compression
 from methods.ops.correlate import correlate_reference
 from methods.ops.filtering import filter_depth
 from methods.ops.frequencies import config_indices
+from methods.skips import bp_search
 from methods.skips.bp_search import SearchPlan, search_depth
 from methods.skips.roi import dilate, full_roi, roi_from_mask_bb
 from methods.skips.settings import ALL, NONE, SkipSettings, default_for, resolve
@@ -222,6 +223,72 @@ def test_coarse_to_fine_misses_a_peak_when_the_condition_fails():
     assert found.depth_m[0] == full.depth_m[0]
 
 
+def test_candidates_match_a_plain_loop(record_property):
+    rng = fresh_rng(record_property)
+    mag = np.where(rng.random((30, 40)) < 0.3, rng.random((30, 40)), -1.0).astype(np.float32)   # (pixels, depths)
+    ratio = rng.uniform(0.2, 0.9, 30)
+    for local_max in (False, True):
+        want = []
+        for p in range(mag.shape[0]):
+            ev = np.flatnonzero(mag[p] >= 0)
+            for j, k in enumerate(ev):
+                near = mag[p, ev[max(j - 1, 0):j + 2]]
+                if mag[p, k] >= mag[p].max() * ratio[p] and (not local_max or mag[p, k] >= near.max()):
+                    want.append((p, k))
+        got = bp_search._candidates(mag, ratio, local_max)
+        assert list(zip(*(a.tolist() for a in got), strict=True)) == want
+
+
+def _search_pair(evaluate, x, y, z_m, plan, **options):
+    """(search without shortcuts, with `options`), filtered as methods.bp does."""
+    full = search_depth(evaluate, x, y, z_m, plan, threshold_db=6.0)
+    fast = search_depth(evaluate, x, y, z_m, plan, threshold_db=6.0, **options)
+    return full, fast, [filter_depth(r.depth_m, r.max_projection, 6.0) for r in (full, fast)]
+
+
+def test_local_max_candidates_find_the_same_peaks_with_fewer_samples(record_property):
+    # sums of 3 Gaussians 1 cm wide (flat over a coarse step, as two-frequency profiles) and the default 1 dB margin:
+    # the lobes are unimodal between the evaluated samples except where two peaks merge, so the local-maximum
+    # search finds the same argmax on nearly every pixel (100 % in 8 draws; 98 % asserted) with ~2.3x fewer refined
+    # samples (the full search refines every flank sample within the window)
+    rng = fresh_rng(record_property)
+    n_px, width_m, dz_m, step = 400, 0.010, 0.001, 7
+    z_m = np.arange(0.25, 0.35 + 1e-9, dz_m)
+    evaluate = _gaussian_profiles(rng.uniform(0.25, 0.35, (n_px, 3)), rng.uniform(0.2, 1.0, (n_px, 3)), width_m)
+    loss_db = 20 * np.log10(np.e) * (np.arange(1, step + 1) * dz_m / 2) ** 2 / (2 * width_m ** 2)
+    plan = SearchPlan.uniform(n_px, step, loss_db, margin_db=1.0)        # the default candidate_margin_db
+    x = np.arange(n_px, dtype=float)
+    full, fast, (full_m, fast_m) = _search_pair(evaluate, x, x * 0, z_m, plan, local_max=True)
+    kept = np.isfinite(full_m) & np.isfinite(fast_m)
+    assert kept.sum() >= 0.98 * np.isfinite(full_m).sum()
+    assert np.mean(fast_m[kept] == full_m[kept]) >= 0.98
+    coarse = n_px * len(bp_search._coarse_indices(len(z_m), step))
+    assert fast.n_evaluated - coarse < 0.6 * (full.n_evaluated - coarse)
+
+
+def test_pixel_lattice_inherits_the_peaks_of_laterally_smooth_profiles(record_property):
+    # 24 x 24 pixels whose profiles (two Gaussian lobes) move slowly across the image: the pixels between lattice
+    # pixels evaluate only the coarse samples near their corners' candidates and find the same peaks
+    rng = fresh_rng(record_property)
+    n_side, width_m, dz_m, step = 24, 0.004, 0.001, 7
+    rows, cols = np.divmod(np.arange(n_side * n_side), n_side)
+    tilt = rng.uniform(-0.001, 0.001, 2)
+    centres = np.stack([0.28 + tilt[0] * rows + tilt[1] * cols, 0.32 - tilt[1] * rows + tilt[0] * cols], axis=1)
+    amplitudes = np.stack([np.full(len(rows), 1.0), rng.uniform(0.3, 0.95) + 0.002 * rows], axis=1)
+    evaluate = _gaussian_profiles(centres, amplitudes, width_m)
+    z_m = np.arange(0.25, 0.35 + 1e-9, dz_m)
+    loss_db = 20 * np.log10(np.e) * (np.arange(1, step + 1) * dz_m / 2) ** 2 / (2 * width_m ** 2)
+    plan = SearchPlan.uniform(len(rows), step, loss_db, margin_db=loss_db[0])
+    x = np.arange(len(rows), dtype=float)                     # the pixel index (the profiles' lookup)
+    lattice = bp_search.Lattice(rows, cols, 2, margin_db=1.0)
+    full, fast, (full_m, fast_m) = _search_pair(evaluate, x, x * 0, z_m, plan, lattice=lattice, local_max=True)
+    same(np.isfinite(full_m), np.isfinite(fast_m))
+    np.testing.assert_array_equal(fast_m, full_m)
+    assert fast.n_evaluated < 0.8 * full.n_evaluated
+    corners, own = lattice.corners()
+    assert own.sum() == 12 * 12 + 2 * 24 - 1 and (corners[~own] >= 0).all()   # lattice + last row and column
+
+
 # ---- physics with every skip on ---------------------------------------------------------------------------------
 
 
@@ -294,12 +361,14 @@ def test_skips_agree_with_the_full_computation_on_a_synthetic_capture(synth_capt
         fast = reconstruct(capture, method, config, roi=ALL.only("fsk_keep"))
         assert agreement(full, fast) >= 0.99 and fast.valid.sum() == pytest.approx(full.valid.sum(), rel=0.01)
         assert fast.extra["roi_px"] < 0.5 * full.valid.size
-    grid = RadarGrid((-0.06, -0.06, 0.24), (0.06, 0.06, 0.36), (61, 61, 61))          # 2 mm pixels and steps
-    for config in ("d05", None):
+    coarse = RadarGrid((-0.06, -0.06, 0.24), (0.06, 0.06, 0.36), (61, 61, 61))        # 2 mm pixels and steps
+    fine = RadarGrid((-0.03, -0.03, 0.24), (0.03, 0.03, 0.36), (61, 61, 121))         # 1 mm: the search's lattice
+    for config, grid in (("d05", coarse), (None, coarse), ("d05", fine)):
         full = reconstruct(capture, "bp", config, grid=grid, roi="none")
         fast = reconstruct(capture, "bp", config, grid=grid, roi="auto")
         assert agreement(full, fast) >= 0.99 and fast.valid.sum() == pytest.approx(full.valid.sum(), rel=0.01)
         assert fast.extra["evaluated_voxels"] < full.extra["evaluated_voxels"]
+        assert fast.extra["search_lattice_px"] == (2 if grid is fine else 1)
 
 
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
