@@ -53,11 +53,11 @@ def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]
     return objects, list(settings.distances) if distances_cm is None else list(distances_cm)
 
 
-# Seconds per capture on two quiet cores (docs/measurements/performance.md, 2026-11-25: generator v9, BP_max's
-# search as released then), for the estimate the demo prints before it starts; re-measure when they move.
-GENERATE_S_PER_CAPTURE = 4.5
-SWEEP_S_PER_CAPTURE = {"table2": 1.5, "table3": 38.0}
-BP_MAX_S_PER_CAPTURE = 19.6          # table3's longest cell
+# Seconds per capture on two quiet cores (docs/measurements/performance.md, 2026-11-26: generator v9, BP's host
+# search with its shortcuts), for the estimate the demo prints before it starts; re-measure when they move.
+GENERATE_S_PER_CAPTURE = 2.6
+SWEEP_S_PER_CAPTURE = {"table2": 2.6, "table3": 26.0}
+BP_MAX_S_PER_CAPTURE = 9.9           # table3's longest cell
 
 
 def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
@@ -74,7 +74,7 @@ def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
     steps += [f"{name} ~{seconds:.0f} s" for name, seconds in sweeps_s.items()]
     text = (f"demo: about {total_s / 60:.0f} min on two quiet cores ({', '.join(steps)}); the long step is "
             f"table3's BP_max (~{n * BP_MAX_S_PER_CAPTURE:.0f} s, one back-projection over 128 frequencies per "
-            f"capture), then the report's pictures (up to ~3 min when drawn anew)")
+            f"capture), then the report's pictures (~30 s when drawn anew)")
     if stored:
         text += f"; cells already in {store} are reused, so this run may take much less"
     return text
