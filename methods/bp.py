@@ -14,7 +14,8 @@ evaluated (the rest NaN); the depth search can run coarse-to-fine with a filter-
 through the point kernels; on the host with local-maximum candidates and a 2 mm pixel lattice) and, on the CPU with
 many frequencies, on range-compressed profiles (methods.skips.bp_search, methods.backends.cpu_range); with many
 frequencies on CUDA the coarse ROI's pass and the whole search run on the device (`Backend.coarse_peaks`,
-`Backend.search_depth`: the same rules as the host's without its two shortcuts, and results). With no ROI
+`Backend.search_depth`: the host's rules without its two shortcuts, so its depths are those of the host search
+with the shortcuts off, and within the skip rule of those with them on). With no ROI
 and no skip (`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
 from __future__ import annotations
@@ -162,11 +163,13 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                     signal, freqs_hz, antennas.tx_m, antennas.rx_m, x_px, y_px, z_m, plan, threshold_db, z_edges,
                     hull_m)
                 found_depth = None if on_device is None else bp_search.SearchResult(*on_device)
+                extra["search_lattice_px"] = 1                      # every pixel evaluates its coarse depths
                 if found_depth is None:
                     options = _host_search_options(skips, grid, pixels)
                     found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges,
                                                          **options)
-                    extra["search_lattice_px"] = options["lattice"].step if options.get("lattice") else 1
+                    if options.get("lattice"):
+                        extra["search_lattice_px"] = options["lattice"].step_px
                 depth_m[pixels], max_proj[pixels] = found_depth.depth_m, found_depth.max_projection
                 n_evaluated += found_depth.n_evaluated
     extra.update(roi_px=int(pixels.sum()), roi_z_m=(float(z_m[0]), float(z_m[-1])) if len(z_m) else None,

@@ -49,7 +49,7 @@ def _failure_reason(rows: pd.DataFrame, floor_pct: float) -> pd.Series:
     if "coverage_pct" in rows:
         coverage = rows["coverage_pct"].astype(float)
         low = (reason == "") & (coverage < floor_pct)          # NaN: not recorded (older rows), no floor
-        reason = reason.where(~low, [f"covers {c:.1f} % of the silhouette (floor {floor_pct:g} %)" for c in coverage])
+        reason = reason.where(~low, [f"covers {c:.2g} % of the silhouette (floor {floor_pct:g} %)" for c in coverage])
     return reason
 
 

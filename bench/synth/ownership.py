@@ -22,8 +22,8 @@ import fcntl
 import json
 import os
 import re
+import secrets
 import stat
-import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -66,8 +66,9 @@ def claim(root: Path) -> None:
         raise ForeignRootError(root, f"holds data the generator did not write (no {MANIFEST_NAME}); not writing")
     # Written whole to a temp file, then linked into place: link fails if the name exists, so the claim is
     # atomic and no process ever reads a manifest that is created but not yet written.
-    tmp = root / f".{MANIFEST_NAME}.{os.getpid()}.{threading.get_ident()}.claim"
-    tmp.write_text(json.dumps({"captures": {}}))
+    tmp = root / f".{MANIFEST_NAME}.{secrets.token_hex(8)}.claim"     # unique on a file system shared by hosts
+    with open(tmp, "x") as handle:
+        handle.write(json.dumps({"captures": {}}))
     try:
         os.link(tmp, manifest)
     except FileExistsError:          # another process claimed it first: it is the generator's all the same
@@ -195,4 +196,3 @@ def is_leftover(entry: Path) -> bool:
     a temp folder seen by the lock holder belongs to no live writer, on this host or any other sharing the file
     system. Process ids are not consulted: they mean nothing on another node and are reused."""
     return TEMP_FOLDER.match(entry.name) is not None
-    return True

@@ -175,18 +175,18 @@ def plan_search(freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray, y
 
 @dataclass(frozen=True)
 class Lattice:
-    """The searched pixels' grid rows and columns (N,) and a lattice of `step` pixels (module doc): the others
+    """The searched pixels' grid rows and columns (N,) and a lattice of `step_px` pixels (module doc): the others
     inherit their coarse samples from the candidates of their lattice corners within the window + `margin_db`."""
 
     rows: np.ndarray
     cols: np.ndarray
-    step: int
+    step_px: int
     margin_db: float
 
     def corners(self) -> tuple[np.ndarray, np.ndarray]:
         """(N, 4) indices of each pixel's enclosing lattice pixels (-1: not in the set) and (N,) bool: the pixel
         evaluates its own coarse samples (on the lattice, or a corner missing)."""
-        step, n = self.step, len(self.rows)
+        step, n = self.step_px, len(self.rows)
         r0, c0 = self.rows // step * step, self.cols // step * step
         r1 = np.where(self.rows % step > 0, r0 + step, r0)
         c1 = np.where(self.cols % step > 0, c0 + step, c0)
@@ -300,7 +300,7 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     spacing = np.minimum(plan.step, max(n_z - 1, 1))
     samples = _Samples(evaluate, x_m, y_m, z_m)
     window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)                     # (N,)
-    if lattice is not None and lattice.step > 1:
+    if lattice is not None and lattice.step_px > 1:
         samples.run_inherited(spacing, window, lattice, local_max)
         coarse_max = np.maximum(samples.mag.max(axis=0), 0.0)                  # unevaluated: -1
     else:

@@ -229,7 +229,8 @@ class BufferPool:
 
     def constant(self, key, build):
         """The arrays `build()` made the first time `key` (hashable, e.g. a grid) was asked for, kept for the
-        CONSTANTS_KEPT most recently used keys."""
+        CONSTANTS_KEPT most recently used keys. A caller that keeps using them beyond its call (a captured CUDA
+        graph replays on their memory) holds its own reference: the pool drops an evicted key's."""
         if key in self._constants:
             self._constants.move_to_end(key)
         else:

@@ -39,7 +39,8 @@ def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
     from methods.backends import backend_for
 
     backend = backend_for(device)
-    rng = np.random.default_rng()
+    seed = int(np.random.SeedSequence().entropy % 2**32)             # fresh each run, printed when it fails
+    rng = np.random.default_rng(seed)
     signal = _surface_frame(rng)
     x_m, y_m = np.linspace(-0.06, 0.06, 7), np.linspace(0.06, -0.06, 7)
     z_m = np.linspace(0.25, 0.35, 101)             # 1 mm, as the paper grid
@@ -57,7 +58,7 @@ def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
     ref_depth, ref_proj = peak_depth_m(np.abs(ref).reshape(len(z_m), len(y_m), len(x_m)), z_m[0], dz_m)
     kept = ref_proj >= ref_proj.max() * 10 ** (-14 / 20)
     assert kept.sum() >= 10
-    assert np.mean(np.abs(got_depth[kept] - ref_depth[kept]) <= 1e-4) >= 0.999
+    assert np.mean(np.abs(got_depth[kept] - ref_depth[kept]) <= 1e-4) >= 0.999, f"seed {seed}"
     mag_tol = MAG_TOL_CPU if device == "warp-cpu" else MAG_TOL_CUDA
     assert np.max(np.abs(got_proj - ref_proj)[kept]) <= mag_tol * ref_proj.max()
     assert np.all(got_proj <= ref_proj + mag_tol * ref_proj.max())   # elsewhere a window's maximum: a lower bound
@@ -74,15 +75,3 @@ def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
     assert np.array_equal(cut_depth[~skipped], got_depth[~skipped])
     assert np.all(cut_proj[skipped] <= got_proj[skipped]) and np.all(cut_proj[skipped] < 0.1 * got_proj.max())
 
-
-def test_the_pool_keeps_the_constants_of_the_last_grids_only():
-    """Each capture's ROI makes its own search grid: a long sweep must not keep every grid's device arrays."""
-    from methods.backends.warp.frames import BufferPool
-
-    pool, built = BufferPool("cpu"), []
-    for grid in [*range(BufferPool.CONSTANTS_KEPT + 5), 0]:
-        pool.constant(("grid", grid), lambda grid=grid: built.append(grid) or grid)
-    assert len(pool._constants) == BufferPool.CONSTANTS_KEPT
-    assert built[-1] == 0 and built.count(0) == 2                  # grid 0 was dropped, so it was built again
-    pool.constant(("grid", BufferPool.CONSTANTS_KEPT + 4), lambda: built.append("again"))
-    assert built[-1] == 0                                          # a kept grid is not rebuilt
