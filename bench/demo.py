@@ -32,6 +32,10 @@ from bench.progress import Heartbeat, run_relayed
 from bench.report import agreement, tables
 
 EXPERIMENTS = ("table2", "table3")
+# Runtimes: the median of 3 calls per capture (within timing.budget_s, 2 s: BP is timed once or twice). Over the
+# demo's cells the mean of these medians was within 2 % of the median of 5 and 7 calls, while one call was up to
+# 12 % off (docs/measurements/sweep.md, 2026-11-26 04:27); 5 calls cost ~25 s more on two cores.
+TIMING_REPEAT = 3
 REPORT_FILES = ("{table}.md", "{table}.csv", "{table}_pairs.csv", "{table}.tex", "runtime_vs_error.png")
 # One job at a time: runtimes measured alone (docs/measurements/performance.md "The demo's cost"
 # has the measured cost of this choice).
@@ -121,18 +125,19 @@ def _reason(stderr_tail: list[str]) -> str:
 
 
 def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "realistic",
-          distances_cm: list[int] | None = None) -> pd.DataFrame:
+          distances_cm: list[int] | None = None, depth_errors: bool = False) -> pd.DataFrame:
     """One multirun into `out/<experiment>`; returns its merged rows. Job lines go to stdout as they finish;
     stderr is passed through and its tail kept, so a failure ends in the job's own reason (SweepFailed).
-    `distances_cm`: only the demo's captures at these distances (default: the dataset config's)."""
+    `distances_cm`: only the demo's captures at these distances (default: the dataset config's); `depth_errors`:
+    the sweep root also gets depth_errors/<capture>.png (what --update-results publishes)."""
     objects, distances = demo_captures(distances_cm)
     captures = ",".join(f"{name}/{distance}" for name in objects for distance in distances)
     command = [sys.executable, "-m", "bench", "-m", f"experiment={experiment}", f"hydra/launcher={LAUNCHER}",
                "dataset=synthetic", f"dataset.root={root}", f"synth={synth}", f"store.dir={store}",
                f"dataset.captures=[{captures}]", f"dataset.generate.distances=[{','.join(map(str, distances))}]",
                f"hydra.sweep.dir={out / experiment}",
-               "report.depth_errors=true",                 # results/<table>/depth_errors is published
-               "timing.repeat=5",                          # runtimes: the median of up to 5 calls (2 s a capture)
+               f"report.depth_errors={str(depth_errors).lower()}",
+               f"timing.repeat={TIMING_REPEAT}",
                *QUIET]
     print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
     shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells
@@ -201,7 +206,8 @@ def main() -> int:
     for experiment in EXPERIMENTS:
         sweep_started = time.perf_counter()
         try:
-            rows = sweep(experiment, root, out, store, synth=args.synth, distances_cm=args.distances)
+            rows = sweep(experiment, root, out, store, synth=args.synth, distances_cm=args.distances,
+                         depth_errors=args.update_results)
         except SweepFailed as err:
             print(f"error: {err}", file=sys.stderr)
             return 1
