@@ -375,7 +375,7 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
     overlay_map = ListedColormap([NO_DEPTH_COLOUR, NO_TRUTH_COLOUR])
     fig = plt.figure(figsize=(10.5, 3.0 * (len(cells) + 1) + 0.6))
     axes = _fixed_grid(fig, len(cells) + 1, 3, left_in=0.7, right_in=0.2, top_in=0.5, bottom_in=0.5,
-                       hspace=0.25, wspace=0.1).subplots(sharex=True, sharey=True, squeeze=False)
+                       hspace=0.25, wspace=0.1).subplots(squeeze=False)   # not shared: 45 linked axes cost more
 
     def show(ax, image, cmap, vmin, vmax, title):
         drawn = ax.imshow(image, extent=truth.extent_cm, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
@@ -400,13 +400,13 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
                            SIGNED_ERROR_LIMIT_CM, f"{label}: depth - ground truth")
         axes[row, 2].imshow(no_error_categories(cell), extent=truth.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
                             interpolation="nearest")
-    axes[0, 0].set(xlim=xlim, ylim=ylim)                  # shared by every map
-    for ax in axes[:, 0]:
-        ax.set_ylabel("y (cm)", fontsize=7)
-    for ax in axes[-1, :]:
-        ax.set_xlabel("x (cm)", fontsize=7)
-    for ax in axes.flat:
-        ax.label_outer()
+    for (row, col), ax in np.ndenumerate(axes):       # one window for every map: labels on the outer axes only
+        ax.set(xlim=xlim, ylim=ylim)
+        ax.tick_params(labelleft=col == 0, labelbottom=row == len(cells))
+        if col == 0:
+            ax.set_ylabel("y (cm)", fontsize=7)
+        if row == len(cells):
+            ax.set_xlabel("x (cm)", fontsize=7)
     key = axes[0, 2]
     key.set_axis_off()
     key.legend(handles=[Patch(color=NO_DEPTH_COLOUR, label="no depth (filtered or not returned)"),
