@@ -8,13 +8,17 @@ capture's metric grid):
   relative to the capture's strongest pixel (the quantity the -14 dB filter thresholds, as in the paper), the
   ground-truth surface (the mesh rasterised on the same grid) is drawn in grey beneath them. The perspective view
   comes from Open3D's offscreen renderer where it runs (it needs a Vulkan driver, e.g. Debian's
-  `mesa-vulkan-drivers`), else from matplotlib (chosen at run time, `renderer()`); side and top views are
-  orthographic projections drawn by matplotlib, with axes in cm.
+  `mesa-vulkan-drivers`), else from matplotlib, projecting the points through the same camera (chosen at run time,
+  `renderer()`); side and top views are orthographic projections drawn by matplotlib, with axes in cm.
 * `point_clouds/<stem>/<cell>.ply` (radar points, magnitude colours) and `<stem>/ground_truth.ply`: metres, radar
   space (x right, y up, z away from the array).
 * `panels/<stem>.png`: ground truth and (where the dataset can be read) the RealSense prior, then one row per cell:
   depth, magnitude and the signed depth error (depth - ground truth, diverging colours: red = behind the surface,
-  blue = in front), "no depth" in grey and depth where there is no ground truth in black.
+  blue = in front), "no depth" in grey and depth where there is no ground truth in black; every map on the same
+  window, one colour bar per quantity beside the legend.
+
+The figures have fixed layouts (margins in inches): about half the CPU of matplotlib's constrained layout, which
+measured every tick label twice (docs/measurements/sweep.md, 2026-11-26 04:30).
 """
 from __future__ import annotations
 
