@@ -80,7 +80,7 @@ def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
     steps += [f"{name} ~{seconds:.0f} s" for name, seconds in sweeps_s.items()]
     text = (f"demo: about {total_s / 60:.0f} min on two quiet cores ({', '.join(steps)}); the long step is "
             f"table3's BP_max (~{n * BP_MAX_S_PER_CAPTURE:.0f} s, one back-projection over 128 frequencies per "
-            f"capture), then the report's pictures (~30 s when drawn anew)")
+            f"capture), then the report's pictures (~20 s when drawn anew)")
     if stored:
         text += f"; cells already in {store} are reused, so this run may take much less"
     return text
