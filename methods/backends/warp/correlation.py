@@ -26,7 +26,7 @@ def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
 def range_profiles(inputs: FrameInputs, freqs_hz, box_m):
     """(function that builds the frame's range profiles over the paths the box `box_m` = (x_m, y_m, z_m) can reach,
     the gather's arguments after the points: rx, tx, k_c, carrier cycles per metre, samples per metre, m0,
-    profiles). The DFT tables are uploaded once per frame."""
+    profiles). The DFT tables are uploaded once per frequency plan, the raw frame once per frame."""
     rplan = range_compression.plan(freqs_hz)
     if rplan is None:
         raise ValueError("range compression needs >= 2 distinct frequencies on an equidistant grid "
@@ -34,7 +34,7 @@ def range_profiles(inputs: FrameInputs, freqs_hz, box_m):
     dev = inputs.device
     n_rx, n_tx_pad = len(inputs.rx_m), len(inputs.tx_m) + inputs.n_tx_pad
     m0, n_window = range_compression.sample_window(rplan, *path_window_m(inputs.tx_m, inputs.rx_m, *box_m))
-    sig, twiddle, shift, index = inputs.range_tables(rplan)
+    twiddle, shift, index = inputs.range_tables(rplan)
     profiles = wp.empty((n_rx * n_tx_pad, n_window), dtype=wp.vec2h, device=dev)
     k_c = 2 * np.pi * rplan.f_carrier_hz / C_M_PER_S
     gather_args = [inputs.rx, inputs.tx_padded, wp.float32(k_c), wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S),
@@ -42,7 +42,8 @@ def range_profiles(inputs: FrameInputs, freqs_hz, box_m):
 
     def build():
         wp.launch(kernels.range_profiles, dim=(n_rx * n_tx_pad, n_window),
-                  inputs=[sig, index, twiddle, shift, int(m0) % rplan.n_samples, profiles], device=dev)
+                  inputs=[inputs.raw_device, wp.float32(inputs.scale), n_tx_pad, index, twiddle, shift,
+                          int(m0) % rplan.n_samples, profiles], device=dev)
     return build, gather_args
 
 

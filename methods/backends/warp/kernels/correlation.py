@@ -297,16 +297,22 @@ def lerp_profile(profiles: wp.array2d(dtype=wp.vec2h), row: int, iu: int, w: wp.
 
 
 @wp.kernel(enable_backward=False)
-def range_profiles(signal: wp.array2d(dtype=wp.vec2f), grid_index: wp.array(dtype=wp.int32),
-                   twiddle: wp.array(dtype=wp.vec2f), shift: wp.array(dtype=wp.vec2f), m0: int,
-                   profiles: wp.array2d(dtype=wp.vec2h)):
-    """profiles[pair, j] = shift[m] sum_n signal[pair, n] twiddle[(i_n m) mod L], m = (m0 + j) mod L, in fp16."""
+def range_profiles(raw: wp.array3d(dtype=wp.vec2f), scale: wp.float32, n_tx_padded: int,
+                   grid_index: wp.array(dtype=wp.int32), twiddle: wp.array(dtype=wp.vec2f),
+                   shift: wp.array(dtype=wp.vec2f), m0: int, profiles: wp.array2d(dtype=wp.vec2h)):
+    """profiles[pair, j] = shift[m] sum_n scale raw[r, t, n] twiddle[(i_n m) mod L], m = (m0 + j) mod L, in fp16,
+    pair = r * n_tx_padded + t (zero for the padded t >= T): straight from the uploaded raw frame (R, T, F)."""
     pair, j = wp.tid()
+    r = pair // n_tx_padded
+    t = pair % n_tx_padded
+    if t >= raw.shape[1]:
+        profiles[pair, j] = wp.vec2h(wp.float16(0.0), wp.float16(0.0))
+        return
     n_samples = twiddle.shape[0]
     m = (m0 + j) % n_samples
     acc = wp.vec2f(0.0, 0.0)
-    for n in range(signal.shape[1]):
-        acc += cmul(signal[pair, n], twiddle[(grid_index[n] * m) % n_samples])
+    for n in range(raw.shape[2]):
+        acc += cmul(raw[r, t, n] * scale, twiddle[(grid_index[n] * m) % n_samples])
     profiles[pair, j] = wp.vec2h(cmul(shift[m], acc))
 
 
