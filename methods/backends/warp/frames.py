@@ -125,16 +125,17 @@ class FrameInputs:
             return gain, np.block([[sig.real, sig.imag], [-sig.imag, sig.real]]).astype(np.float16)
         return self._get("host_mat", build)
 
-    def tile_tables(self, with_mat: bool = True):
+    def tile_tables(self, with_mat: bool = True, split: bool = False):
         """(rx4, tx4, gain, mat): padded antennas, per-frequency gain and fp16 [[Sr, Si], [-Si, Sr]] / gain; `mat`
-        (F, 192, 192) is built (on the host) only `with_mat` (Warp-CPU's kernel), else None and the gain is the
-        one `tx_half_tables` builds on the device (CUDA)."""
+        (F, 192, 192) is built (on the host) `with_mat` (Warp-CPU's kernel), else `mat` is the device-built operand
+        of the CUDA kernel with its gain: M_h^T (`tx_half_tables`) or, `split`, its hi/lo parts
+        (`tx_split_tables`)."""
         n = int(TC_ANT)
         rx4, tx4 = _constant(self._antenna_key + ("tc",), lambda: (
             wp.array(antennas4(self.rx_m, n), dtype=wp.vec4f, device=self.device),
             wp.array(antennas4(self.tx_m, n), dtype=wp.vec4f, device=self.device)))
         if not with_mat:
-            return rx4, tx4, self._device_tables()[0], None
+            return (rx4, tx4) + tuple(self.tx_split_tables() if split else self._device_tables())
         gain = self._get("tc_gain", lambda: wp.array(self._host_mat()[0].astype(np.float32), dtype=wp.float32,
                                                      device=self.device))
         mat = self._get("tc_mat", lambda: wp.array(np.ascontiguousarray(self._host_mat()[1]), dtype=wp.float16,
@@ -171,6 +172,21 @@ class FrameInputs:
     def tx_half_tables(self):
         """The operand M_h^T of `correlate_tiles_tx_halves` (see `host_tx_half_tables`), built on the device."""
         return self._device_tables()[1]
+
+    def tx_split_tables(self):
+        """(gain (F,) float32, (F, 4, 96, TC2_KP) fp16): the split operand of `correlate_tiles_tx_split` (kernel
+        "tc3"), built on the device from the raw frame (`table_kernels.tx_split_table`)."""
+        def build():
+            dev = self.device
+            gain_raw = wp.zeros(self.n_freqs, dtype=wp.float32, device=dev)
+            gain = wp.empty(self.n_freqs, dtype=wp.float32, device=dev)
+            mat_hl = wp.empty((self.n_freqs, 4, int(TC_ANT), int(TC2_KP)), dtype=wp.float16, device=dev)
+            scale = wp.float32(self.scale)
+            table_kernels.launch_signal_gain(self.raw_device, scale, gain_raw, dev)
+            wp.launch(table_kernels.tx_split_table, dim=mat_hl.shape, inputs=[self.raw_device, scale, gain_raw, gain,
+                                                                                mat_hl], device=dev)
+            return gain, mat_hl
+        return self._get("split_tables", build)
 
 
 class FrameCache:
