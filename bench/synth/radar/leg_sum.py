@@ -126,11 +126,17 @@ def _block_pool() -> ThreadPoolExecutor:
     return ThreadPoolExecutor(_threads(), thread_name_prefix="leg-sum")
 
 
-def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: np.ndarray) -> np.ndarray:
-    """The frame (n_rx, n_tx, F) complex64 of all rows; `positions` (K, D) places the rows for blocking."""
+def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: np.ndarray,
+            device: str = "cpu") -> np.ndarray:
+    """The frame (n_rx, n_tx, F) complex64 of all rows; `positions` (K, D) places the rows for blocking.
+
+    `device` "cpu" sums with NumPy (module doc); "cuda" or "warp-cpu" computes the legs here and sums them on that
+    Warp device at every frequency (bench.synth.radar.warp_sum)."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
-    outs = [np.zeros((len(freqs_hz), n_rx, n_tx), dtype=np.complex64) for _ in range(PARTIAL_SUMS)]
     blocks = compact_blocks(np.asarray(positions, dtype=np.float64), BLOCK_ROWS)
+    if device != "cpu":
+        return _device_sum(legs, blocks, n_rx, n_tx, freqs_hz, device)
+    outs = [np.zeros((len(freqs_hz), n_rx, n_tx), dtype=np.complex64) for _ in range(PARTIAL_SUMS)]
     pool = _block_pool()
 
     def block(rows: np.ndarray, into: np.ndarray | None) -> np.ndarray | None:
@@ -155,6 +161,41 @@ def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: n
     return np.ascontiguousarray(out.transpose(1, 2, 0))
 
 
+def _device_sum(legs: Legs, blocks: list[np.ndarray], n_rx: int, n_tx: int, freqs_hz: np.ndarray,
+                device: str) -> np.ndarray:
+    """leg_sum on a Warp device: the blocks' legs on the pool's threads, added on the device in block order."""
+    from bench.synth.radar.warp_sum import DeviceSum, prepare
+
+    def block(rows: np.ndarray):
+        return prepare(*legs(rows), freqs_hz, n_rx)
+
+    total = DeviceSum(device, n_rx, n_tx, freqs_hz)
+    pool = _block_pool()
+    window = 2 * _threads()          # blocks in flight (each block's legs: (n_rx + n_tx) x 2048 x 16 B, ~6 MB)
+    pending: collections.deque = collections.deque()
+    with single_threaded_blas():
+        for number, rows in enumerate(blocks):
+            pending.append(pool.submit(block, rows))
+            while len(pending) >= window or (number == len(blocks) - 1 and pending):
+                total.add(pending.popleft().result())
+    return total.result()
+
+
+def block_nodes(path_m: np.ndarray, freqs_hz: np.ndarray,
+                n_rx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A block's centre path per antenna (E,) m, its node frequencies (M,) Hz and the fit (F, M) complex64 from the
+    nodes to every frequency (frequency_nodes.interpolator); fit None (the nodes are the frequencies) with the
+    centres 0."""
+    low, high = path_m.min(axis=1), path_m.max(axis=1)
+    centre = 0.5 * (low + high)
+    # every pair's path lies within centre_rx + centre_tx +- (largest receive half-span + largest transmit one)
+    half_span = 0.5 * (high - low)
+    nodes_hz, fit = interpolator(freqs_hz, half_span[:n_rx].max() + half_span[n_rx:].max())
+    if fit is None:                 # direct: every frequency is a node, nothing to factor out
+        centre[:] = 0.0
+    return centre, nodes_hz, fit
+
+
 def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx: int,
               into: np.ndarray | None = None) -> np.ndarray | None:
     """One block's sum (F, n_rx, n_tx) complex64 (path_m, weight: (n_rx + n_tx, k), receive legs first; None for
@@ -163,13 +204,7 @@ def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx
     (0 + x is x)."""
     if path_m.shape[1] == 0:
         return None
-    low, high = path_m.min(axis=1), path_m.max(axis=1)
-    centre = 0.5 * (low + high)
-    # every pair's path lies within centre_rx + centre_tx +- (largest receive half-span + largest transmit one)
-    half_span = 0.5 * (high - low)
-    nodes_hz, fit = interpolator(freqs_hz, half_span[:n_rx].max() + half_span[n_rx:].max())
-    if fit is None:                 # direct: every frequency is a node, nothing to factor out
-        centre[:] = 0.0
+    centre, nodes_hz, fit = block_nodes(path_m, freqs_hz, n_rx)
     offsets_m = path_m - centre[:, None]
     at_nodes = np.empty((len(nodes_hz), n_rx, path_m.shape[0] - n_rx), dtype=np.complex64)
     steps_hz = np.diff(nodes_hz)

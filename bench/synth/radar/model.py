@@ -17,14 +17,14 @@ from bench.synth.sampling import SurfaceSamples
 
 def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarray, rx_m: np.ndarray,
                    freqs_hz: np.ndarray, normals: np.ndarray | None = None, lobe_rad: np.ndarray | None = None,
-                   element_exponent: float = 0.0, min_lobe_gain: float = 0.0) -> np.ndarray:
+                   element_exponent: float = 0.0, min_lobe_gain: float = 0.0, device: str = "cpu") -> np.ndarray:
     """Frame of point scatterers: complex64 (n_rx, n_tx, F) indexed [rx, tx, f].
 
     points_m (K, 3) radar space, amplitudes (K,) complex (reflectivity, without path loss), tx_m (n_tx, 3),
     rx_m (n_rx, 3), freqs_hz (F,). Path loss 1 / (|p - tx| |p - rx|) is applied here, and per leg (scatterer to
     one antenna) the optional gains of `leg_gains`: the quasi-specular lobe (normals (K, 3), lobe_rad (K,)) and the
     element pattern cos(theta)^element_exponent. Scatterers whose lobe gain towards every antenna is below
-    `min_lobe_gain` are skipped.
+    `min_lobe_gain` are skipped. `device`: where the sum runs (bench.synth.radar.leg_sum).
     """
     points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     amplitudes = np.asarray(amplitudes, dtype=np.complex128).reshape(-1)
@@ -86,7 +86,7 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
         complex_weight[:n_rx] *= amplitudes[rows].astype(np.complex64)
         return dist_m, complex_weight
 
-    return leg_sum(legs, points_m, n_rx, len(tx_m), freqs_hz)
+    return leg_sum(legs, points_m, n_rx, len(tx_m), freqs_hz, device)
 
 
 def leg_distances(points_m: np.ndarray, antennas_m: np.ndarray) -> np.ndarray:
@@ -141,14 +141,15 @@ def roughen(samples: SurfaceSamples, config: SynthConfig, rng: np.random.Generat
 
 
 def clutter_frame(tx_m: np.ndarray, rx_m: np.ndarray, freqs_hz: np.ndarray, config: SynthConfig,
-                  object_power: float, rng: np.random.Generator) -> np.ndarray:
+                  object_power: float, rng: np.random.Generator, device: str = "cpu") -> np.ndarray:
     """Empty-room response: `clutter_points` static point scatterers behind the object (x, y within +-0.4 m,
     z between 0.8 and 1.0 x the back-wall distance), random complex amplitudes, scaled so that their mean power is
     `clutter_to_signal_db` relative to the mean object power."""
     n = config.clutter_points
     points_m = np.column_stack([rng.uniform(-0.4, 0.4, n), rng.uniform(-0.4, 0.4, n),
                                 rng.uniform(0.8, 1.0, n) * config.wall_distance_m])
-    clutter = simulate_frame(points_m, rng.normal(size=n) + 1j * rng.normal(size=n), tx_m, rx_m, freqs_hz)
+    clutter = simulate_frame(points_m, rng.normal(size=n) + 1j * rng.normal(size=n), tx_m, rx_m, freqs_hz,
+                             device=device)
     scale = np.sqrt(object_power * 10.0 ** (config.clutter_to_signal_db / 10.0) / np.mean(np.abs(clutter) ** 2))
     return (clutter * scale).astype(np.complex64)
 

@@ -156,7 +156,7 @@ def _second_leg(pairs: BouncePairs, rows: np.ndarray, antennas_m: np.ndarray, el
 
 
 def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs_hz: np.ndarray,
-                   element_exponent: float = 0.0) -> np.ndarray:
+                   element_exponent: float = 0.0, device: str = "cpu") -> np.ndarray:
     """The double-bounce echo of `pairs`, both directions, complex64 (n_rx, n_tx, F) in the direct echo's units.
 
     Rows 0..K-1 are the forward paths (tx -> p1 -> p2 -> rx), rows K..2K-1 the reverse ones (bench.synth.radar.leg_sum).
@@ -173,4 +173,4 @@ def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs
 
     # a row is placed by its receive-leg and transmit-leg points, so that a block's legs span little
     positions = np.block([[pairs.second_m, pairs.first_m], [pairs.first_m, pairs.second_m]])
-    return leg_sum(legs, positions, len(rx_m), len(tx_m), freqs_hz)
+    return leg_sum(legs, positions, len(rx_m), len(tx_m), freqs_hz, device)
