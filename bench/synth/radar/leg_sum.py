@@ -14,6 +14,9 @@ PARTIAL_SUMS sums, added in a fixed order: results do not depend on the machine'
 contribution is computed on one process-wide pool of threads, one per core, shared by the captures built at once
 (a capture's blocks then use the cores other captures have finished with: the bowl's multipath is the catalogue's
 long pole), and added to its sum in block order.
+
+On a Warp device (`device` "cuda" or "warp-cpu": bench.synth.radar.warp_sum) the same blocks, legs and node fits are
+formed here and the node sums, the interpolation and the block order's additions (in float64) run on the device.
 """
 from __future__ import annotations
 
@@ -167,7 +170,8 @@ def _device_sum(legs: Legs, blocks: list[np.ndarray], n_rx: int, n_tx: int, freq
     from bench.synth.radar.warp_sum import DeviceSum, prepare
 
     def block(rows: np.ndarray):
-        return prepare(*legs(rows), freqs_hz, n_rx)
+        path_m, weight = legs(rows)
+        return prepare(path_m, weight, *block_nodes(path_m, freqs_hz, n_rx)) if path_m.shape[1] else None
 
     total = DeviceSum(device, n_rx, n_tx, freqs_hz)
     pool = _block_pool()

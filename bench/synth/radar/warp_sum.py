@@ -1,10 +1,11 @@
 """The radar sum on a Warp device ("cuda" or "warp-cpu"; kernels in `bench.synth.radar.warp_kernels`).
 
-`leg_sum` computes each block's legs and its nodes (`prepare`, on its pool's threads, with the NumPy path's own
-`block_nodes`: the same centres, node frequencies and fits) and hands them, in block order, to a `DeviceSum`, which
-forms the node sums and the interpolation on the device and adds each block to a float64 frame. The device work of
-all captures built at once goes through one lock, block by block, each frame into its own sum: a capture's frame
-does not depend on what else runs (tests/bench/synth/test_synth_warp.py).
+`leg_sum` computes each block's legs and its nodes on its pool's threads, with the NumPy path's own
+`leg_sum.block_nodes` (the same centres, node frequencies and fits), lays them out for the device (`prepare`) and
+hands them, in block order, to a `DeviceSum`, which forms the node sums and the interpolation on the device and adds
+each block to a float64 frame. The device work of all captures built at once goes through one lock, block by block,
+each frame into its own sum: a capture's frame does not depend on what else runs
+(tests/bench/synth/test_synth_warp.py).
 """
 from __future__ import annotations
 
@@ -15,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.synth.config import C_M_PER_S
-from bench.synth.radar.leg_sum import block_nodes
 
 WARP_DEVICES = {"cuda": "cuda:0", "warp-cpu": "cpu"}     # the project's device names (methods.backends.DEVICES)
 _device_lock = threading.Lock()
@@ -45,11 +45,10 @@ class Block:
     fit: np.ndarray | None
 
 
-def prepare(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx: int) -> Block | None:
-    """A block of legs (bench.synth.radar.leg_sum.Legs) with its nodes; None for no rows."""
-    if path_m.shape[1] == 0:
-        return None
-    centre_m, nodes_hz, fit = block_nodes(path_m, freqs_hz, n_rx)
+def prepare(path_m: np.ndarray, weight: np.ndarray, centre_m: np.ndarray, nodes_hz: np.ndarray,
+            fit: np.ndarray | None) -> Block:
+    """A block of legs (bench.synth.radar.leg_sum.Legs) and its nodes (leg_sum.block_nodes) as the device takes
+    them."""
     parts = np.ascontiguousarray(weight, dtype=np.complex64).view(np.float32).reshape(*weight.shape, 2)
     fit_parts = None if fit is None else np.ascontiguousarray(fit).view(np.float32).reshape(*fit.shape, 2)
     return Block(np.ascontiguousarray(path_m, dtype=np.float64), parts, centre_m,
