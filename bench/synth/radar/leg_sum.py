@@ -15,8 +15,8 @@ contribution is computed on one process-wide pool of threads, one per core, shar
 (a capture's blocks then use the cores other captures have finished with: the bowl's multipath is the catalogue's
 long pole), and added to its sum in block order.
 
-On a Warp device (`device` "cuda" or "warp-cpu": bench.synth.radar.warp_sum) the same blocks, legs and node fits are
-formed here and the node sums, the interpolation and the block order's additions (in float64) run on the device.
+On a Warp device ("cuda" or "warp-cpu": bench.synth.radar.warp_sum) the same blocks and node fits are used; the
+legs, node sums, interpolation and the block order's additions (in float64) run on the device.
 """
 from __future__ import annotations
 
@@ -129,17 +129,11 @@ def _block_pool() -> ThreadPoolExecutor:
     return ThreadPoolExecutor(_threads(), thread_name_prefix="leg-sum")
 
 
-def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: np.ndarray,
-            device: str = "cpu") -> np.ndarray:
-    """The frame (n_rx, n_tx, F) complex64 of all rows; `positions` (K, D) places the rows for blocking.
-
-    `device` "cpu" sums with NumPy (module doc); "cuda" or "warp-cpu" computes the legs here and sums them on that
-    Warp device at every frequency (bench.synth.radar.warp_sum)."""
+def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: np.ndarray) -> np.ndarray:
+    """The frame (n_rx, n_tx, F) complex64 of all rows; `positions` (K, D) places the rows for blocking."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
-    blocks = compact_blocks(np.asarray(positions, dtype=np.float64), BLOCK_ROWS)
-    if device != "cpu":
-        return _device_sum(legs, blocks, n_rx, n_tx, freqs_hz, device)
     outs = [np.zeros((len(freqs_hz), n_rx, n_tx), dtype=np.complex64) for _ in range(PARTIAL_SUMS)]
+    blocks = compact_blocks(np.asarray(positions, dtype=np.float64), BLOCK_ROWS)
     pool = _block_pool()
 
     def block(rows: np.ndarray, into: np.ndarray | None) -> np.ndarray | None:
@@ -164,33 +158,17 @@ def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: n
     return np.ascontiguousarray(out.transpose(1, 2, 0))
 
 
-def _device_sum(legs: Legs, blocks: list[np.ndarray], n_rx: int, n_tx: int, freqs_hz: np.ndarray,
-                device: str) -> np.ndarray:
-    """leg_sum on a Warp device: the blocks' legs on the pool's threads, added on the device in block order."""
-    from bench.synth.radar.warp_sum import DeviceSum, prepare
-
-    def block(rows: np.ndarray):
-        path_m, weight = legs(rows)
-        return prepare(path_m, weight, *block_nodes(path_m, freqs_hz, n_rx)) if path_m.shape[1] else None
-
-    total = DeviceSum(device, n_rx, n_tx, freqs_hz)
-    pool = _block_pool()
-    window = 2 * _threads()          # blocks in flight (each block's legs: (n_rx + n_tx) x 2048 x 16 B, ~6 MB)
-    pending: collections.deque = collections.deque()
-    with single_threaded_blas():
-        for number, rows in enumerate(blocks):
-            pending.append(pool.submit(block, rows))
-            while len(pending) >= window or (number == len(blocks) - 1 and pending):
-                total.add(pending.popleft().result())
-    return total.result()
-
-
 def block_nodes(path_m: np.ndarray, freqs_hz: np.ndarray,
                 n_rx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """A block's centre path per antenna (E,) m, its node frequencies (M,) Hz and the fit (F, M) complex64 from the
     nodes to every frequency (frequency_nodes.interpolator); fit None (the nodes are the frequencies) with the
     centres 0."""
-    low, high = path_m.min(axis=1), path_m.max(axis=1)
+    return nodes_of_bounds(path_m.min(axis=1), path_m.max(axis=1), freqs_hz, n_rx)
+
+
+def nodes_of_bounds(low: np.ndarray, high: np.ndarray, freqs_hz: np.ndarray,
+                    n_rx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """block_nodes from the block's shortest and longest path per antenna (E,) m."""
     centre = 0.5 * (low + high)
     # every pair's path lies within centre_rx + centre_tx +- (largest receive half-span + largest transmit one)
     half_span = 0.5 * (high - low)

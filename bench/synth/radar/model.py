@@ -86,7 +86,14 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
         complex_weight[:n_rx] *= amplitudes[rows].astype(np.complex64)
         return dist_m, complex_weight
 
-    return leg_sum(legs, points_m, n_rx, len(tx_m), freqs_hz, device)
+    if device != "cpu":         # the same legs and sums on a Warp device (bench.synth.radar.warp_sum)
+        from bench.synth.radar import warp_sum
+
+        lobes = (normals, lobe_rad) if normals is not None else (None, None)
+        rows = warp_sum.Rows(warp_sum.Side(points_m, *lobes, amplitudes), warp_sum.Side(points_m, *lobes),
+                             element_exponent, cos_limit if normals is not None and min_lobe_gain > 0 else None)
+        return warp_sum.frame(rows, points_m, rx_m, tx_m, freqs_hz, device)
+    return leg_sum(legs, points_m, n_rx, len(tx_m), freqs_hz)
 
 
 def leg_distances(points_m: np.ndarray, antennas_m: np.ndarray) -> np.ndarray:

@@ -173,4 +173,11 @@ def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs
 
     # a row is placed by its receive-leg and transmit-leg points, so that a block's legs span little
     positions = np.block([[pairs.second_m, pairs.first_m], [pairs.first_m, pairs.second_m]])
-    return leg_sum(legs, positions, len(rx_m), len(tx_m), freqs_hz, device)
+    if device != "cpu":         # the same legs and sums on a Warp device (bench.synth.radar.warp_sum)
+        from bench.synth.radar import warp_sum
+
+        second = warp_sum.Side(pairs.second_m, pairs.outgoing, pairs.lobe_rad, pairs.amplitude)
+        first = warp_sum.Side(pairs.first_m, added_m=pairs.hop_m)
+        rows = warp_sum.Rows(warp_sum.joined(second, first), warp_sum.joined(first, second), element_exponent)
+        return warp_sum.frame(rows, positions, rx_m, tx_m, freqs_hz, device)
+    return leg_sum(legs, positions, len(rx_m), len(tx_m), freqs_hz)
