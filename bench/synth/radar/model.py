@@ -24,7 +24,8 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
     rx_m (n_rx, 3), freqs_hz (F,). Path loss 1 / (|p - tx| |p - rx|) is applied here, and per leg (scatterer to
     one antenna) the optional gains of `leg_gains`: the quasi-specular lobe (normals (K, 3), lobe_rad (K,)) and the
     element pattern cos(theta)^element_exponent. Scatterers whose lobe gain towards every antenna is below
-    `min_lobe_gain` are skipped. `device`: where the sum runs (bench.synth.radar.leg_sum).
+    `min_lobe_gain` are skipped. `device`: "cpu" sums with NumPy (bench.synth.radar.leg_sum), "cuda" or "warp-cpu"
+    forms the legs and sums on that Warp device (bench.synth.radar.warp_sum).
     """
     points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     amplitudes = np.asarray(amplitudes, dtype=np.complex128).reshape(-1)
@@ -35,6 +36,13 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
         # lobe gain exp(-theta^2 / (2 lobe^2)) >= min_lobe_gain  <=>  cos(theta) >= cos(lobe sqrt(2 ln(1 / min)))
         limit_rad = np.asarray(lobe_rad) * np.sqrt(2.0 * np.log(1.0 / min_lobe_gain))
         cos_limit = np.where(limit_rad < np.pi, np.cos(np.minimum(limit_rad, np.pi)), -np.inf)
+    if device != "cpu":         # the same legs and sums on a Warp device (bench.synth.radar.warp_sum)
+        from bench.synth.radar import warp_sum
+
+        lobes = (normals, lobe_rad) if normals is not None else (None, None)
+        rows = warp_sum.Rows(warp_sum.Side(points_m, *lobes, amplitudes), warp_sum.Side(points_m, *lobes),
+                             element_exponent, cos_limit if normals is not None and min_lobe_gain > 0 else None)
+        return warp_sum.frame(rows, points_m, rx_m, tx_m, freqs_hz, device)
 
     def legs(rows: np.ndarray):
         # every pass below runs over cache-sized chunks of antennas (row_chunks); all gains in float32 (the weights
@@ -86,13 +94,6 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
         complex_weight[:n_rx] *= amplitudes[rows].astype(np.complex64)
         return dist_m, complex_weight
 
-    if device != "cpu":         # the same legs and sums on a Warp device (bench.synth.radar.warp_sum)
-        from bench.synth.radar import warp_sum
-
-        lobes = (normals, lobe_rad) if normals is not None else (None, None)
-        rows = warp_sum.Rows(warp_sum.Side(points_m, *lobes, amplitudes), warp_sum.Side(points_m, *lobes),
-                             element_exponent, cos_limit if normals is not None and min_lobe_gain > 0 else None)
-        return warp_sum.frame(rows, points_m, rx_m, tx_m, freqs_hz, device)
     return leg_sum(legs, points_m, n_rx, len(tx_m), freqs_hz)
 
 

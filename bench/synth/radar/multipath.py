@@ -160,6 +160,7 @@ def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs
     """The double-bounce echo of `pairs`, both directions, complex64 (n_rx, n_tx, F) in the direct echo's units.
 
     Rows 0..K-1 are the forward paths (tx -> p1 -> p2 -> rx), rows K..2K-1 the reverse ones (bench.synth.radar.leg_sum).
+    `device` as model.simulate_frame's.
     """
     tx_m, rx_m = np.asarray(tx_m, float), np.asarray(rx_m, float)
     n_pairs = len(pairs.hop_m)

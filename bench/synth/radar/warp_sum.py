@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.synth.config import C_M_PER_S
-from bench.synth.radar.leg_sum import BLOCK_ROWS, compact_blocks, nodes_of_bounds
+from bench.synth.radar import leg_sum
 
 WARP_DEVICES = {"cuda": "cuda:0", "warp-cpu": "cpu"}     # the project's device names (methods.backends.DEVICES)
 _device_lock = threading.Lock()
@@ -25,14 +25,16 @@ _device_lock = threading.Lock()
 
 @functools.cache
 def _warp():
-    """Warp and the kernels, imported and initialised on first use only (the NumPy path never imports Warp)."""
-    import warp as wp
+    """Warp and the kernels, imported and initialised on first use only (the NumPy path never imports Warp); under
+    the device lock, as captures built at once may ask first together."""
+    with _device_lock:
+        import warp as wp
 
-    from bench.synth.radar import warp_kernels
-    from methods.backends.warp.runtime import init
+        from bench.synth.radar import warp_kernels
+        from methods.backends.warp.runtime import init
 
-    init()
-    return wp, warp_kernels
+        init()
+        return wp, warp_kernels
 
 
 @dataclass(frozen=True)
@@ -78,7 +80,7 @@ def frame(rows: Rows, positions: np.ndarray, rx_m: np.ndarray, tx_m: np.ndarray,
     (as bench.synth.radar.leg_sum.leg_sum)."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     total = _DeviceFrame(rows, np.concatenate([rx_m, tx_m]), len(rx_m), freqs_hz, WARP_DEVICES[device])
-    for block in compact_blocks(np.asarray(positions, dtype=np.float64), BLOCK_ROWS):
+    for block in leg_sum.compact_blocks(np.asarray(positions, dtype=np.float64), leg_sum.BLOCK_ROWS):
         total.add(block)
     return total.result()
 
@@ -135,7 +137,7 @@ class _DeviceFrame:
             bounds = wp.empty((n_antennas, -(-len(rows) // int(kernels.BOUND_ROWS)), 2), dtype=wp.float64)
             wp.launch(kernels.path_bounds, dim=bounds.shape[:2], inputs=[path, bounds])
             ranges = bounds.numpy()
-        centre_m, nodes_hz, fit = nodes_of_bounds(ranges[..., 0].min(axis=1), ranges[..., 1].max(axis=1),
+        centre_m, nodes_hz, fit = leg_sum.nodes_of_bounds(ranges[..., 0].min(axis=1), ranges[..., 1].max(axis=1),
                                                   self._freqs_hz, n_rx)
         n_nodes, tile, slices = len(nodes_hz), kernels.PAIR_TILE, kernels.ROW_SLICES
         fit_parts = np.zeros((1, 1, 2), np.float32) if fit is None else np.ascontiguousarray(fit).view(
