@@ -51,6 +51,9 @@ class WarpBackend(Backend):
         self.column_term_tol = columns.TERM_TOL
         self.last_window_edges = None
 
+    def holding_frame(self, signal):
+        return self.frames.held(signal)
+
     def make_launch(self, signal, freqs_hz, tx_m, rx_m, *, kernel: str | None = None, points_m=None, grid_m=None,
                     sum_freqs: bool = False, reuse: bool = False):
         """`correlation.make_launch` on this device (the benchmarks time the function it returns)."""

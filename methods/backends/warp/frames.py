@@ -5,6 +5,7 @@ buffers. On CUDA a new frame uploads its raw samples once and builds the tensor-
 from __future__ import annotations
 
 from collections import OrderedDict
+from contextlib import contextmanager
 from functools import cached_property
 
 import numpy as np
@@ -197,9 +198,32 @@ class FrameCache:
     def __init__(self, wp_device: str):
         self.wp_device = wp_device
         self._frames: dict = {}
+        self._held_signal = None        # `held`: the caller's frame array during one reconstruction
+        self._held: tuple | None = None   # (its small arrays, its inputs) once looked up inside `held`
+
+    @contextmanager
+    def held(self, signal: np.ndarray):
+        """Within the block, lookups of this very array object skip the byte comparison with the cached frames
+        (the caller does not change its frame during one reconstruction; BP_max looks it up three times, ~0.7 ms
+        each on the H100's host); the small arrays (frequencies, antennas) are still compared."""
+        self._held_signal, self._held = signal, None
+        try:
+            yield
+        finally:
+            self._held_signal, self._held = None, None
 
     def inputs(self, signal, freqs_hz, tx_m, rx_m) -> FrameInputs:
         parts = [np.ascontiguousarray(a) for a in (signal, freqs_hz, tx_m, rx_m)]
+        is_held = self._held_signal is not None and parts[0] is self._held_signal
+        if is_held and self._held is not None and all(
+                _equal(a, b) for a, b in zip(parts[1:], self._held[0], strict=True)):
+            return self._held[1]
+        inputs = self._lookup(parts, signal, freqs_hz, tx_m, rx_m)
+        if is_held:
+            self._held = ([a.copy() for a in parts[1:]], inputs)
+        return inputs
+
+    def _lookup(self, parts, signal, freqs_hz, tx_m, rx_m) -> FrameInputs:
         key = (tuple(a.shape for a in parts), tuple(a.dtype.str for a in parts))
         for cached_key, (cached, inputs) in reversed(self._frames.items()):
             if cached_key[:2] == key and all(_equal(a, b) for a, b in zip(parts, cached, strict=False)):
