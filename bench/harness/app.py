@@ -26,7 +26,7 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
-from bench.harness import CONFIG_DIR, captures, stages, validate
+from bench.harness import CONFIG_DIR, captures, stages, validate, workers
 from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
@@ -39,8 +39,7 @@ from bench.progress import each
 from methods.domain.capture import Capture, RadarGrid
 from methods.domain.errors import DatasetError
 from methods.ops.frequencies import config_targets_ghz
-from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
-from metrics.resample import resample_depth_m, resample_nearest
+from metrics.evaluate import SCORE_COLUMNS, GroundTruth
 
 log = logging.getLogger("bench")
 
@@ -246,6 +245,7 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
                              threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
     load_1m = machine_load()
     busy_s, cpu_s, wall_s = busy_cpu_s(), time.process_time(), time.perf_counter()
+    pool_s = workers.workers_cpu_s()        # the scoring workers' CPU is the sweep's own (bench.harness.workers)
     with stages.stage("methods"):
         rec = call()
     columns = {"load_1m": load_1m, "cpu_ms": 1e3 * (time.process_time() - cpu_s),
@@ -257,35 +257,28 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
             runtimes_ms.append(call().timings_ms["total"])
     # what the rest of the machine used over the timed calls, in cores (/proc/stat counts clock ticks of 10 ms:
     # over windows under 20 ms it says nothing)
-    own_s, window_s = time.process_time() - cpu_s, time.perf_counter() - wall_s
+    own_s = time.process_time() - cpu_s + workers.workers_cpu_s() - pool_s
+    window_s = time.perf_counter() - wall_s
     columns["others_cores"] = (max(0.0, busy_cpu_s() - busy_s - own_s) / window_s if window_s >= 0.02
                                else float("nan"))
     return rec, {"runtime_ms": statistics.median(runtimes_ms), "runtime_runs": len(runtimes_ms), **columns}
 
 
 def _compute(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, device: str, gt: GroundTruth | None
-             ) -> tuple[dict, dict]:
-    """Reconstruct on `grid`, then evaluate on the capture's metric grid (the ground truth's; the depth map is
-    resampled there when the method computed on another grid): (row without identification columns, arrays on
-    the metric grid)."""
+             ) -> tuple[dict, workers.Scoring]:
+    """Reconstruct on `grid`: (the row's columns without identification, its score columns left empty, and what
+    scoring it on the capture's metric grid needs: bench.harness.workers.score)."""
     rec, timing_columns = _reconstruct(cfg, method, capture, grid, device)
-    metric_grid = capture.radar.grid
-    with stages.stage("metrics"):
-        depth_m = resample_depth_m(rec.depth_m, rec.grid, metric_grid)
-        if gt is not None:
-            scores, gt_depth_m = evaluate(depth_m, gt, faithful=bool(cfg.metrics.faithful)), gt.depth_m
-        else:
-            scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
-            log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
-        magnitude = resample_nearest(rec.magnitude, rec.grid, metric_grid)
-    if rec.invalid_reason:       # the method's own account of an all-invalid result, not just 'no valid'
-        scores["failure"] = rec.invalid_reason
+    if gt is None:
+        log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
     row = {"f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
            **timing_columns, "device": rec.device,
-           "compute_grid_size": "x".join(map(str, rec.grid.size)), "roi_px": rec.extra.get("roi_px"), **scores}
+           "compute_grid_size": "x".join(map(str, rec.grid.size)), "roi_px": rec.extra.get("roi_px"),
+           **dict.fromkeys(SCORE_COLUMNS)}
     row.update({f"t_{stage}_ms": ms for stage, ms in rec.timings_ms.items() if stage != "total"})
-    arrays = {"depth_m": depth_m, "magnitude": magnitude, "gt_depth_m": gt_depth_m}
-    return row, arrays
+    task = workers.Scoring(rec.depth_m, rec.magnitude, rec.grid, capture.radar.grid, gt,
+                           bool(cfg.metrics.faithful), rec.invalid_reason)
+    return row, task
 
 
 @functools.lru_cache(maxsize=4)
@@ -315,13 +308,18 @@ def _reusable(stored_timing: str | None, timing: str) -> bool:
     return stored_timing == "contended" and contended(machine_load())
 
 
-def _write_outputs(out_dir: Path, row: dict, arrays: dict, grid: RadarGrid, store: Store | None, key: str | None,
-                   results_csv: ResultsCsv) -> None:
-    """One capture's files: depth PNG + JSON + preview, its arrays in arrays.h5 (copied from the store's cell when
-    there is one), its results.csv line."""
+def _stem(row: dict) -> str:
+    return f"{row['object']}_{row['distance']}_{row['frame']:06d}"
+
+
+def _write_outputs(out_dir: Path, row: dict, arrays: dict | None, grid: RadarGrid, store: Store | None,
+                   key: str | None, results_csv: ResultsCsv, depth_written: bool = False) -> None:
+    """One capture's files: depth PNG + JSON + preview (unless a worker wrote them), its arrays in arrays.h5 (copied
+    from the store's cell when there is one), its results.csv line."""
     with stages.stage("outputs"):
-        stem = f"{row['object']}_{row['distance']}_{row['frame']:06d}"
-        write_depth(out_dir, stem, arrays["depth_m"], grid)
+        stem = _stem(row)
+        if not depth_written:
+            write_depth(out_dir, stem, arrays["depth_m"], grid)
         array_attrs = {**_grid_attrs(grid), "key": key or ""}
         if store is not None:      # compressed once, into the store
             store.copy_arrays(key, out_dir / "arrays.h5", stem, array_attrs)
@@ -361,6 +359,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     antenna_files = _antenna_files(cfg)
     identity = _identity(cfg, method, params)
     out_dir.mkdir(parents=True, exist_ok=True)
+    pool = workers.pool(workers.pool_size(OmegaConf.select(cfg, "evaluation.workers", default="auto"), device))
     rows, results_csv, writer = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
@@ -383,22 +382,19 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 if hit is not None and not _reusable(hit[0].get("timing"), timing):
                     hit = None           # its runtime was measured beside other jobs (or not recorded): re-measure
             if hit is None:
-                row, arrays, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
-                                                  store, grid_override, device, timing, identity)
+                row, task, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
+                                                store, grid_override, device, timing, identity)
                 row.update(hostname=socket.gethostname(), code_version=cell["code"], key=key)
-                if store is not None:
-                    writer.submit(store.put, key, row, arrays, _grid_attrs(grid))
+                result = _scored(task, row, grid, out_dir, store, pool, writer)
+                computed_s.append(time.perf_counter() - started)
             else:
                 row, arrays, attrs = hit
                 row.update(identity)
                 grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]),
                                  tuple(map(int, attrs["grid_size"])))
-            rows.append({**row, "cached": hit is not None})
-            writer.submit(_write_outputs, out_dir, rows[-1], arrays, grid, store, key, results_csv)
-            if hit is None:
-                computed_s.append(time.perf_counter() - started)
-                log.info("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"],
-                         row["distance"], row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
+                result = workers.done((row, arrays, 0.0))
+            writer.submit(_finish, result, hit is not None, rows, out_dir, grid, store, key, results_csv,
+                          hit is None and pool is not None)
     finally:
         with stages.stage("outputs"):
             writer.close()
@@ -410,10 +406,40 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     return rows
 
 
+def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, store: Store | None, pool,
+            writer: BackgroundWriter):
+    """A computed capture scored (bench.harness.workers): in this thread without a pool (its cell then written by
+    the writer), else in a worker, which also writes its depth files and cell. A future of (row, arrays or None,
+    the worker's seconds)."""
+    if pool is None:
+        with stages.stage("metrics"):
+            scores, arrays = workers.score(task)
+        row.update(scores)
+        if store is not None:
+            writer.submit(store.put, row["key"], row, arrays, _grid_attrs(grid))
+        return workers.done((row, arrays, 0.0))
+    return pool.submit(workers.score_and_write, task, row, out_dir, _stem(row), _grid_attrs(grid),
+                       None if store is None else str(store.root))
+
+
+def _finish(result, cached: bool, rows: list[dict], out_dir: Path, grid: RadarGrid, store: Store | None,
+            key: str | None, results_csv: ResultsCsv, by_worker: bool) -> None:
+    """On the writer thread, in capture order: the capture's scored row (waiting for its worker, which wrote its
+    depth files: `by_worker`) into `rows` and its files (`_write_outputs`)."""
+    row, arrays, worker_s = result.result()
+    stages.add_background("metrics", worker_s)
+    rows.append({**row, "cached": cached})
+    _write_outputs(out_dir, rows[-1], arrays, grid, store, key, results_csv, depth_written=by_worker)
+    if not cached:
+        log.info("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"],
+                 row["distance"], row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
+
+
 def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_filtered: bool, antenna_files,
                   store: Store | None, grid_override, device: str, timing: str, identity: dict
-                  ) -> tuple[dict, dict, RadarGrid]:
-    """Read, reconstruct and score one capture frame: (row, arrays, metric grid)."""
+                  ) -> tuple[dict, workers.Scoring, RadarGrid]:
+    """Read and reconstruct one capture frame: (row with its score columns empty, what scoring it needs, metric
+    grid)."""
     def read(parts):
         with stages.stage("reading"):
             return captures.read(capture_dir, frame, parts, empty_filtered, antenna_files, store)
@@ -427,10 +453,10 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
     grid = capture.radar.grid
     row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index, **identity,
            "radar_time_s": capture.radar.timestamp_s, **_pairing_columns(capture, capture_dir)}
-    scores, arrays = _compute(cfg, method, capture, grid_for(capture, grid_override), device, gt)
-    busy = timing == "alone" and contended(scores["load_1m"], scores.get("others_cores", float("nan")))
-    row.update(scores, timing="contended" if busy else timing)
-    return row, arrays, grid
+    columns, task = _compute(cfg, method, capture, grid_for(capture, grid_override), device, gt)
+    busy = timing == "alone" and contended(columns["load_1m"], columns.get("others_cores", float("nan")))
+    row.update(columns, timing="contended" if busy else timing)
+    return row, task, grid
 
 
 def _isolate_warp_cache() -> None:

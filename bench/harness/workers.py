@@ -1,0 +1,124 @@
+"""Scoring a computed capture (metrics, its row, its depth files and store cell) in worker processes.
+
+On a GPU the methods take milliseconds while scoring a capture takes tens (resampling onto the metric grid and
+`metrics.evaluate`: 20-30 ms a row, BP's dense maps the most) and writing its depth PNGs and store cell as much
+again: done in the main thread, that is most of a sweep. With `evaluation.workers` N > 0 each computed capture is
+handed to a pool of N processes while the main thread reads and reconstructs the next one; the run's ordered files
+(results.csv lines, arrays.h5) are still written in capture order by its writer thread, each waiting for its
+capture's result. The numbers are those of the main thread's scoring (the same functions on the same arrays).
+
+`auto` (the default) is N = min(cores - 2, MAX_AUTO_WORKERS) for a Warp device and 0 for the CPU device, whose
+methods use every core (a worker beside a timed call would slow it). The pool is started once per process, from
+a fresh interpreter (multiprocessing's forkserver: never forked from a process holding CUDA or threads), and serves
+every later job of a basic launcher's sweep. The workers' CPU time is the sweep's own: the contention check of a
+timed call (bench.harness.sizing.contended) does not count it as other processes'.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import multiprocessing
+import os
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from bench.harness.results import write_depth
+from methods.domain.capture import RadarGrid
+from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
+from metrics.resample import resample_depth_m, resample_nearest
+
+MAX_AUTO_WORKERS = 6
+# what a worker imports before it takes work (from the fork server: once for all workers)
+_PRELOAD = ["bench.harness.workers", "bench.harness.store"]
+
+
+@dataclasses.dataclass
+class Scoring:
+    """What scoring one reconstruction needs: its maps on the grid it was computed on, the capture's metric grid and
+    ground truth (None: no mesh), the profile, and the method's own reason for an all-invalid result."""
+
+    depth_m: np.ndarray
+    magnitude: np.ndarray
+    computed_grid: RadarGrid
+    metric_grid: RadarGrid
+    gt: GroundTruth | None
+    faithful: bool
+    invalid_reason: str | None
+
+
+def score(task: Scoring) -> tuple[dict, dict]:
+    """(metric columns, arrays on the metric grid: depth_m, magnitude, gt_depth_m) of a reconstruction."""
+    depth_m = resample_depth_m(task.depth_m, task.computed_grid, task.metric_grid)
+    if task.gt is not None:
+        scores, gt_depth_m = evaluate(depth_m, task.gt, faithful=task.faithful), task.gt.depth_m
+    else:
+        scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
+    magnitude = resample_nearest(task.magnitude, task.computed_grid, task.metric_grid)
+    if task.invalid_reason:       # the method's own account of an all-invalid result, not just 'no valid'
+        scores["failure"] = task.invalid_reason
+    return scores, {"depth_m": depth_m, "magnitude": magnitude, "gt_depth_m": gt_depth_m}
+
+
+@functools.lru_cache(maxsize=4)
+def _store(root: str):
+    from bench.harness.store import Store
+
+    return Store(root)
+
+
+def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None
+                    ) -> tuple[dict, dict | None, float]:
+    """In a worker: score the reconstruction into `row` (its score columns), write the depth PNG, JSON and preview
+    and, with a store, the cell (arrays, then the row). Returns (row, the arrays where there is no store to copy
+    them from, else None, seconds spent)."""
+    started = time.perf_counter()
+    scores, arrays = score(task)
+    row.update(scores)
+    write_depth(out_dir, stem, arrays["depth_m"], task.metric_grid)
+    if store_root is not None:
+        _store(store_root).put(row["key"], row, arrays, grid_attrs)
+    return row, None if store_root is not None else arrays, time.perf_counter() - started
+
+
+def pool_size(setting, device: str) -> int:
+    """Workers for `evaluation.workers` (a whole number >= 0, or 'auto': module doc) on the resolved `device`."""
+    if setting == "auto":
+        return 0 if device == "cpu" else max(0, min((os.cpu_count() or 1) - 2, MAX_AUTO_WORKERS))
+    return int(setting)
+
+
+_POOLS: dict[int, ProcessPoolExecutor] = {}
+
+
+def pool(workers: int) -> ProcessPoolExecutor | None:
+    """The process's pool of `workers` processes (None for 0), started on first use and kept for later jobs."""
+    if workers <= 0:
+        return None
+    if workers not in _POOLS:
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
+        _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context)
+    return _POOLS[workers]
+
+
+def done(value) -> Future:
+    """A finished future holding `value` (what the main thread computed itself)."""
+    future = Future()
+    future.set_result(value)
+    return future
+
+
+def workers_cpu_s() -> float:
+    """CPU seconds the pools' worker processes have used (/proc/<pid>/stat; 0 where there is no pool or no /proc)."""
+    total = 0
+    for process in multiprocessing.active_children():
+        try:
+            with open(f"/proc/{process.pid}/stat") as stat:
+                fields = stat.read().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        total += int(fields[11]) + int(fields[12])          # utime, stime (clock ticks)
+    return total / os.sysconf("SC_CLK_TCK") if total else 0.0
