@@ -1,8 +1,8 @@
 """A whole experiment as a user runs it, its wall time beside its methods' and metrics' time, split by stage.
 
 `python -m bench.perf experiment NAME --root DIR [--device cpu|cuda] [--grid G] [--cells CELL ...] [--repeat N]
-[--set KEY=VALUE ...] [--out DIR]` runs `python -m bench -m experiment=NAME hydra/launcher=basic dataset=maroon dataset.root=DIR
-device=D` (one job at a time, as the demo runs it) in a fresh process with the stage clock on
+[--set KEY=VALUE ...] [--out DIR]` runs `python -m bench -m experiment=NAME hydra/launcher=basic dataset=maroon
+dataset.root=DIR device=D` (one job at a time, as the demo runs it) in a fresh process with the stage clock on
 (bench.harness.stages): seconds in composing the jobs' configurations, imports, reading captures, the ground
 truth, the methods (`methods.reconstruct` calls: prior, warm-up, method), the metrics, the output files (on the
 main thread: what it waited for; `outputs (background)` is the writer thread's time, overlapped; with scoring
