@@ -360,6 +360,8 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     identity = _identity(cfg, method, params)
     out_dir.mkdir(parents=True, exist_ok=True)
     pool = workers.pool(workers.pool_size(OmegaConf.select(cfg, "evaluation.workers", default="auto"), device))
+    if pool is not None and device in workers.HOST_DEVICES:
+        timing = "parallel"              # the workers share the cores the method's timed calls use
     rows, results_csv, writer = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]

@@ -7,8 +7,9 @@ handed to a pool of N processes while the main thread reads and reconstructs the
 (results.csv lines, arrays.h5) are still written in capture order by its writer thread, each waiting for its
 capture's result. The numbers are those of the main thread's scoring (the same functions on the same arrays).
 
-`auto` (the default) is N = min(cores - 2, MAX_AUTO_WORKERS) for a Warp device and 0 for the CPU device, whose
-methods use every core (a worker beside a timed call would slow it). The pool is started once per process, from
+`auto` (the default) is N = min(cores - 2, MAX_AUTO_WORKERS) for a GPU and 0 for the CPU devices, whose methods
+use every core: a worker beside a timed call would slow it, so N > 0 given there makes every row's timing
+'parallel' (its runtime is never shown as one measured alone). The pool is started once per process, from
 a fresh interpreter (multiprocessing's forkserver: never forked from a process holding CUDA or threads), and serves
 every later job of a basic launcher's sweep. The workers' CPU time is the sweep's own: the contention check of a
 timed call (bench.harness.sizing.contended) does not count it as other processes'.
@@ -31,6 +32,7 @@ from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
 
 MAX_AUTO_WORKERS = 6
+HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: workers beside them time them 'parallel'
 # what a worker imports before it takes work (from the fork server: once for all workers)
 _PRELOAD = ["bench.harness.workers", "bench.harness.store"]
 
@@ -86,7 +88,7 @@ def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_att
 def pool_size(setting, device: str) -> int:
     """Workers for `evaluation.workers` (a whole number >= 0, or 'auto': module doc) on the resolved `device`."""
     if setting == "auto":
-        return 0 if device == "cpu" else max(0, min((os.cpu_count() or 1) - 2, MAX_AUTO_WORKERS))
+        return 0 if device in HOST_DEVICES else max(0, min((os.cpu_count() or 1) - 2, MAX_AUTO_WORKERS))
     return int(setting)
 
 
