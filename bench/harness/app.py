@@ -27,6 +27,7 @@ from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
 from bench.harness import CONFIG_DIR, captures, stages, validate, workers
+from bench.harness import results as outputs
 from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
@@ -328,8 +329,8 @@ def _write_outputs(out_dir: Path, row: dict, arrays: dict | None, grid: RadarGri
         results_csv.add(row)       # appended after every capture: an interruption loses no row
 
 
-def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str = "alone", params: str = ""
-        ) -> list[dict]:
+def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str = "alone", params: str = "",
+        defer_outputs: bool = False) -> list[dict]:
     """Evaluate every capture of the configured dataset; returns the result rows (also written to disk).
 
     The method, its parameters and the prior are checked before any data is generated or read. `generate`: first
@@ -338,9 +339,15 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     `timing_mode`) goes into every computed row ('contended' instead of 'alone' when the machine was busy,
     bench.harness.sizing.contended); with 'alone' a stored row timed beside other jobs is recomputed, so a
     contended runtime never passes for a clean one. `params`: the row's parameters (bench.harness.identity).
-    Output files are written on a background thread while the next capture computes.
+    Output files are written on a background thread while the next capture computes; with `defer_outputs` (a
+    basic launcher's sweep: its next job runs in this process) the run returns before the last of them are written
+    (bench.harness.results.defer) and its rows are complete once `finish_deferred` returned; the next run waits for
+    them first.
     """
     from methods.backends import resolve_device
+
+    with stages.stage("outputs"):
+        outputs.finish_deferred()
 
     device = resolve_device(cfg.device)
     method = _method(cfg)
@@ -362,7 +369,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     pool = workers.pool(workers.pool_size(OmegaConf.select(cfg, "evaluation.workers", default="auto"), device))
     if pool is not None and device in workers.HOST_DEVICES:
         timing = "parallel"              # the workers share the cores the method's timed calls use
-    rows, results_csv, writer = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter()
+    rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _job_log()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
     label = f"{method.label} {cfg.freq.name}{f' {params}' if params else ''}"
@@ -395,9 +402,16 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]),
                                  tuple(map(int, attrs["grid_size"])))
                 result = workers.done((row, arrays, 0.0))
-            writer.submit(_finish, result, hit is not None, rows, out_dir, grid, store, key, results_csv,
-                          hit is None and pool is not None)
-    finally:
+            rows.append({"object": row["object"], "distance": row["distance"], "cached": hit is not None})
+            writer.submit(_finish, result, rows[-1], out_dir, grid, store, key, results_csv,
+                          hit is None and pool is not None, job_log)
+    except BaseException:
+        with stages.stage("outputs"):
+            writer.close()
+        raise
+    if defer_outputs:
+        outputs.defer(writer)
+    else:
         with stages.stage("outputs"):
             writer.close()
     if durations is not None and computed_s:
@@ -424,17 +438,33 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
                        None if store is None else str(store.root))
 
 
-def _finish(result, cached: bool, rows: list[dict], out_dir: Path, grid: RadarGrid, store: Store | None,
-            key: str | None, results_csv: ResultsCsv, by_worker: bool) -> None:
+def _finish(result, entry: dict, out_dir: Path, grid: RadarGrid, store: Store | None, key: str | None,
+            results_csv: ResultsCsv, by_worker: bool, job_log) -> None:
     """On the writer thread, in capture order: the capture's scored row (waiting for its worker, which wrote its
-    depth files: `by_worker`) into `rows` and its files (`_write_outputs`)."""
+    depth files: `by_worker`) into its `entry` of the run's rows, and its files (`_write_outputs`)."""
     row, arrays, worker_s = result.result()
     stages.add_background("metrics", worker_s)
-    rows.append({**row, "cached": cached})
-    _write_outputs(out_dir, rows[-1], arrays, grid, store, key, results_csv, depth_written=by_worker)
+    cached = entry["cached"]
+    entry.clear()
+    entry.update(row, cached=cached)            # in the row's column order, `cached` last
+    _write_outputs(out_dir, entry, arrays, grid, store, key, results_csv, depth_written=by_worker)
     if not cached:
-        log.info("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"],
-                 row["distance"], row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
+        job_log("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],
+                row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
+
+
+def _job_log():
+    """`log.info` into the handlers logging has now (the job's, which Hydra replaces when the next job starts): for
+    lines the writer thread logs after its job returned (`defer_outputs`)."""
+    handlers = [*log.handlers, *(logging.getLogger().handlers if log.propagate else ())]
+
+    def info(message: str, *args) -> None:
+        if log.isEnabledFor(logging.INFO):
+            record = log.makeRecord(log.name, logging.INFO, __file__, 0, message, args, None)
+            for handler in handlers:
+                if record.levelno >= handler.level:
+                    handler.handle(record)
+    return info
 
 
 def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_filtered: bool, antenna_files,
@@ -459,6 +489,13 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
     busy = timing == "alone" and contended(columns["load_1m"], columns.get("others_cores", float("nan")))
     row.update(columns, timing="contended" if busy else timing)
     return row, task, grid
+
+
+def _next_job_here(hydra_cfg: DictConfig) -> bool:
+    """Whether the multirun's next job runs in this process after this one (the basic launcher): this job's last
+    output files may then be written while it starts (the merge callback waits for them)."""
+    return (hydra_cfg.mode == RunMode.MULTIRUN
+            and str(hydra_cfg.launcher.get("_target_", "")).endswith("BasicLauncher"))
 
 
 def _isolate_warp_cache() -> None:
@@ -499,7 +536,7 @@ def main(cfg: DictConfig) -> None:
         started = time.perf_counter()
         params = params_string(list(hydra_cfg.overrides.task))
         rows = run(cfg, out_dir, generate=synthetic_asked(list(hydra_cfg.overrides.task)),
-                   timing=timing_mode(hydra_cfg), params=params)
+                   timing=timing_mode(hydra_cfg), params=params, defer_outputs=_next_job_here(hydra_cfg))
         print(progress_line(cfg, hydra_cfg, rows, time.perf_counter() - started, params), flush=True)
     except BrokenPipeError:    # stdout closed (`... | head`): quiet exit 141, not Hydra's traceback
         cli.exit_on_closed_stdout()

@@ -20,6 +20,7 @@ import dataclasses
 import functools
 import multiprocessing
 import os
+import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
@@ -33,8 +34,9 @@ from metrics.resample import resample_depth_m, resample_nearest
 
 MAX_AUTO_WORKERS = 6
 HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: workers beside them time them 'parallel'
-# what a worker imports before it takes work (from the fork server: once for all workers)
-_PRELOAD = ["bench.harness.workers", "bench.harness.store"]
+# what a worker imports before it takes work (in the fork server: once for all workers): scoring, the cell's HDF5,
+# the KD-trees and the depth previews' colour map
+_PRELOAD = ["bench.harness.workers", "bench.harness.store", "scipy.spatial", "matplotlib.cm"]
 
 
 @dataclasses.dataclass
@@ -103,7 +105,16 @@ def pool(workers: int) -> ProcessPoolExecutor | None:
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
         _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context)
+        # its processes started by another thread: the fork server's imports (~1 s) and the workers' starts happen
+        # while this one goes on (Warp's start, reading, the first reconstruction), not when it hands over work
+        threading.Thread(target=_start, args=(_POOLS[workers], workers), name="workers-start", daemon=True).start()
     return _POOLS[workers]
+
+
+def _start(pool: ProcessPoolExecutor, workers: int) -> None:
+    """Start every worker (a pool starts one per task handed over while none is idle)."""
+    for started in [pool.submit(int) for _ in range(workers)]:
+        started.result()
 
 
 def done(value) -> Future:
