@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import inspect
+import io
 import logging
 import os
 import socket
@@ -19,6 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import h5py
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
@@ -33,7 +35,7 @@ from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
 from bench.harness.results import BackgroundWriter, ResultsCsv, write_depth
 from bench.harness.sizing import busy_cpu_s, contended, machine_load, sweep_jobs, timing_mode
-from bench.harness.store import Store, capture_files, code_version, write_arrays
+from bench.harness.store import Store, capture_files, code_version, copy_cell, write_arrays
 from bench.maroon import reader
 from bench.maroon.frames import parse_frame_spec, select_frames
 from bench.progress import each
@@ -313,10 +315,11 @@ def _stem(row: dict) -> str:
     return f"{row['object']}_{row['distance']}_{row['frame']:06d}"
 
 
-def _write_outputs(out_dir: Path, row: dict, arrays: dict | None, grid: RadarGrid, store: Store | None,
+def _write_outputs(out_dir: Path, row: dict, arrays: dict | bytes | None, grid: RadarGrid, store: Store | None,
                    key: str | None, results_csv: ResultsCsv, depth_written: bool = False) -> None:
     """One capture's files: depth PNG + JSON + preview (unless a worker wrote them), its arrays in arrays.h5 (copied
-    from the store's cell when there is one), its results.csv line."""
+    from the store's cell when there is one, or from the image of one a worker compressed: `arrays` as bytes), its
+    results.csv line."""
     with stages.stage("outputs"):
         stem = _stem(row)
         if not depth_written:
@@ -324,6 +327,9 @@ def _write_outputs(out_dir: Path, row: dict, arrays: dict | None, grid: RadarGri
         array_attrs = {**_grid_attrs(grid), "key": key or ""}
         if store is not None:      # compressed once, into the store
             store.copy_arrays(key, out_dir / "arrays.h5", stem, array_attrs)
+        elif isinstance(arrays, bytes):
+            with h5py.File(io.BytesIO(arrays), "r") as image:
+                copy_cell(image, out_dir / "arrays.h5", stem, array_attrs)
         else:
             write_arrays(out_dir / "arrays.h5", stem, arrays, array_attrs)
         results_csv.add(row)       # appended after every capture: an interruption loses no row

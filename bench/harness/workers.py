@@ -74,17 +74,22 @@ def _store(root: str):
 
 
 def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None
-                    ) -> tuple[dict, dict | None, float]:
+                    ) -> tuple[dict, bytes | None, float]:
     """In a worker: score the reconstruction into `row` (its score columns), write the depth PNG, JSON and preview
-    and, with a store, the cell (arrays, then the row). Returns (row, the arrays where there is no store to copy
-    them from, else None, seconds spent)."""
+    and, with a store, the cell (arrays, then the row). Returns (row, where there is no store to copy the arrays
+    from the cell's image, bench.harness.store.cell_image, else None, seconds spent)."""
+    from bench.harness.store import cell_image
+
     started = time.perf_counter()
     scores, arrays = score(task)
     row.update(scores)
     write_depth(out_dir, stem, arrays["depth_m"], task.metric_grid)
     if store_root is not None:
         _store(store_root).put(row["key"], row, arrays, grid_attrs)
-    return row, None if store_root is not None else arrays, time.perf_counter() - started
+        image = None
+    else:
+        image = cell_image(arrays, grid_attrs)
+    return row, image, time.perf_counter() - started
 
 
 def pool_size(setting, device: str) -> int:
