@@ -440,6 +440,7 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
         if store is not None:
             writer.submit(store.put, row["key"], row, arrays, _grid_attrs(grid))
         return workers.done((row, arrays, 0.0))
+    task.gt = workers.shipped(task.gt)
     return pool.submit(workers.score_and_write, task, row, out_dir, _stem(row), _grid_attrs(grid),
                        None if store is None else str(store.root))
 
