@@ -14,7 +14,7 @@ from hydra import compose, initialize_config_dir
 
 from bench.harness import CONFIG_DIR, workers
 from bench.harness.app import run
-from bench.harness.results import MEASURED_COLUMNS
+from bench.harness.results import MEASURED_COLUMNS, finish_deferred
 
 from hostile_tools import copy_capture
 
@@ -30,12 +30,12 @@ def root(synth_capture, tmp_path_factory):
     return root
 
 
-def _run(root: Path, out: Path, store: Path | None, n_workers: int) -> list[dict]:
+def _run(root: Path, out: Path, store: Path | None, n_workers: int, defer: bool = False) -> list[dict]:
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         cfg = compose(config_name="config", overrides=[
             "dataset=maroon", f"dataset.root={root}", "method=2fsk", "freq=d05", "prior=none",
             f"store.dir={store if store is not None else 'null'}", f"evaluation.workers={n_workers}"])
-    return run(cfg, out)
+    return run(cfg, out, defer_outputs=defer)
 
 
 def _stable(table: pd.DataFrame) -> pd.DataFrame:
@@ -96,3 +96,16 @@ def _spin(seconds: float) -> None:
     end = time.process_time() + seconds
     while time.process_time() < end:
         pass
+
+
+def test_a_run_that_defers_its_files_is_complete_once_they_are_finished(root, tmp_path):
+    reference = _stable(pd.DataFrame(_run(root, tmp_path / "reference", None, 0)))
+    rows = _run(root, tmp_path / "deferred", None, 1, defer=True)
+    assert [r["object"] for r in rows] == ["01_plate", "03_sphere"]     # known when the run returns
+    finish_deferred()
+    pd.testing.assert_frame_equal(_stable(pd.DataFrame(rows)), reference)
+    pd.testing.assert_frame_equal(_stable(pd.read_csv(tmp_path / "deferred" / "results.csv")),
+                                  _stable(pd.read_csv(tmp_path / "reference" / "results.csv")))
+    first = _run(root, tmp_path / "first", None, 1, defer=True)
+    _run(root, tmp_path / "second", None, 0)          # a later run waits for the earlier one's files first
+    assert all("P_cm" in row for row in first) and len(pd.read_csv(tmp_path / "first" / "results.csv")) == 2
