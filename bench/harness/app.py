@@ -372,7 +372,8 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     antenna_files = _antenna_files(cfg)
     identity = _identity(cfg, method, params)
     out_dir.mkdir(parents=True, exist_ok=True)
-    pool = workers.pool(workers.pool_size(OmegaConf.select(cfg, "evaluation.workers", default="auto"), device))
+    pool = workers.pool(workers.pool_size(OmegaConf.select(cfg, "evaluation.workers", default="auto"), device,
+                                          shared=timing == "parallel"))
     if pool is not None and device in workers.HOST_DEVICES:
         timing = "parallel"              # the workers share the cores the method's timed calls use
     rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _job_log()

@@ -7,12 +7,13 @@ handed to a pool of N processes while the main thread reads and reconstructs the
 (results.csv lines, arrays.h5) are still written in capture order by its writer thread, each waiting for its
 capture's result. The numbers are those of the main thread's scoring (the same functions on the same arrays).
 
-`auto` (the default) is N = min(cores - 2, MAX_AUTO_WORKERS) for a GPU and 0 for the CPU devices, whose methods
-use every core: a worker beside a timed call would slow it, so N > 0 given there makes every row's timing
-'parallel' (its runtime is never shown as one measured alone). The pool is started once per process, from
-a fresh interpreter (multiprocessing's forkserver: never forked from a process holding CUDA or threads), and serves
-every later job of a basic launcher's sweep. The workers' CPU time is the sweep's own: the contention check of a
-timed call (bench.harness.sizing.contended) does not count it as other processes'.
+`auto` (the default) is N = min(cores - 2, MAX_AUTO_WORKERS) for a GPU job that runs alone (0 where other jobs of
+the sweep share the machine) and 0 for the CPU devices, whose methods use every core: a worker beside a timed call
+would slow it, so N > 0 given there makes every row's timing 'parallel' (its runtime is never shown as one measured
+alone). The pool is started once per process, from a fresh interpreter (multiprocessing's forkserver: never forked
+from a process holding CUDA or threads), and serves every later job of a basic launcher's sweep. The workers' CPU
+time is the sweep's own: the contention check of a timed call (bench.harness.sizing.contended) does not count it as
+other processes'. They still share the host's memory and caches with the timed calls (docs/measurements/sweep.md).
 """
 from __future__ import annotations
 
@@ -118,10 +119,13 @@ def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_att
     return row, image, time.perf_counter() - started
 
 
-def pool_size(setting, device: str) -> int:
-    """Workers for `evaluation.workers` (a whole number >= 0, or 'auto': module doc) on the resolved `device`."""
+def pool_size(setting, device: str, shared: bool = False) -> int:
+    """Workers for `evaluation.workers` (a whole number >= 0, or 'auto': module doc) on the resolved `device`;
+    `shared`: other jobs of the sweep run beside this one (joblib, SLURM arrays), which 'auto' leaves the cores to."""
     if setting == "auto":
-        return 0 if device in HOST_DEVICES else max(0, min((os.cpu_count() or 1) - 2, MAX_AUTO_WORKERS))
+        if device in HOST_DEVICES or shared:
+            return 0
+        return max(0, min((os.cpu_count() or 1) - 2, MAX_AUTO_WORKERS))
     return int(setting)
 
 

@@ -89,6 +89,7 @@ def test_a_workers_cpu_time_is_counted_as_the_sweeps_own():
 def test_pool_sizes():
     assert workers.pool_size("auto", "cpu") == 0
     assert 0 <= workers.pool_size("auto", "cuda") <= workers.MAX_AUTO_WORKERS
+    assert workers.pool_size("auto", "cuda", shared=True) == 0          # jobs side by side: their cores
     assert workers.pool_size(3, "cpu") == 3
 
 
