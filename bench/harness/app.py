@@ -248,7 +248,6 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
                              threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
     load_1m = machine_load()
     busy_s, cpu_s, wall_s = busy_cpu_s(), time.process_time(), time.perf_counter()
-    pool_s = workers.workers_cpu_s()        # the scoring workers' CPU is the sweep's own (bench.harness.workers)
     with stages.stage("methods"):
         rec = call()
     columns = {"load_1m": load_1m, "cpu_ms": 1e3 * (time.process_time() - cpu_s),
@@ -260,8 +259,7 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
             runtimes_ms.append(call().timings_ms["total"])
     # what the rest of the machine used over the timed calls, in cores (/proc/stat counts clock ticks of 10 ms:
     # over windows under 20 ms it says nothing)
-    own_s = time.process_time() - cpu_s + workers.workers_cpu_s() - pool_s
-    window_s = time.perf_counter() - wall_s
+    own_s, window_s = time.process_time() - cpu_s, time.perf_counter() - wall_s
     columns["others_cores"] = (max(0.0, busy_cpu_s() - busy_s - own_s) / window_s if window_s >= 0.02
                                else float("nan"))
     return rec, {"runtime_ms": statistics.median(runtimes_ms), "runtime_runs": len(runtimes_ms), **columns}
@@ -374,8 +372,8 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     out_dir.mkdir(parents=True, exist_ok=True)
     pool = workers.pool(workers.pool_size(OmegaConf.select(cfg, "evaluation.workers", default="auto"), device,
                                           shared=timing == "parallel"))
-    if pool is not None and device in workers.HOST_DEVICES:
-        timing = "parallel"              # the workers share the cores the method's timed calls use
+    if pool is not None:
+        timing = "parallel"              # the workers share the host with the timed calls (bench.harness.workers)
     rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _job_log()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
@@ -408,7 +406,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 row.update(identity)
                 grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]),
                                  tuple(map(int, attrs["grid_size"])))
-                result = workers.done((row, arrays, 0.0))
+                result = workers.done((row, arrays, {}))
             rows.append({"object": row["object"], "distance": row["distance"], "cached": hit is not None})
             writer.submit(_finish, result, rows[-1], out_dir, grid, store, key, results_csv,
                           hit is None and pool is not None, job_log)
@@ -433,14 +431,14 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
             writer: BackgroundWriter):
     """A computed capture scored (bench.harness.workers): in this thread without a pool (its cell then written by
     the writer), else in a worker, which also writes its depth files and cell. A future of (row, arrays or None,
-    the worker's seconds)."""
+    the worker's seconds by stage)."""
     if pool is None:
         with stages.stage("metrics"):
             scores, arrays = workers.score(task)
         row.update(scores)
         if store is not None:
             writer.submit(store.put, row["key"], row, arrays, _grid_attrs(grid))
-        return workers.done((row, arrays, 0.0))
+        return workers.done((row, arrays, {}))
     task.gt = workers.shipped(task.gt)
     return pool.submit(workers.score_and_write, task, row, out_dir, _stem(row), _grid_attrs(grid),
                        None if store is None else str(store.root))
@@ -451,7 +449,8 @@ def _finish(result, entry: dict, out_dir: Path, grid: RadarGrid, store: Store | 
     """On the writer thread, in capture order: the capture's scored row (waiting for its worker, which wrote its
     depth files: `by_worker`) into its `entry` of the run's rows, and its files (`_write_outputs`)."""
     row, arrays, worker_s = result.result()
-    stages.add_background("metrics", worker_s)
+    for stage, seconds in worker_s.items():
+        stages.add_background(stage, seconds)
     cached = entry["cached"]
     entry.clear()
     entry.update(row, cached=cached)            # in the row's column order, `cached` last

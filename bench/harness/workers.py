@@ -7,13 +7,13 @@ handed to a pool of N processes while the main thread reads and reconstructs the
 (results.csv lines, arrays.h5) are still written in capture order by its writer thread, each waiting for its
 capture's result. The numbers are those of the main thread's scoring (the same functions on the same arrays).
 
-`auto` (the default) is N = min(cores - 2, MAX_AUTO_WORKERS) for a GPU job that runs alone (0 where other jobs of
-the sweep share the machine) and 0 for the CPU devices, whose methods use every core: a worker beside a timed call
-would slow it, so N > 0 given there makes every row's timing 'parallel' (its runtime is never shown as one measured
-alone). The pool is started once per process, from a fresh interpreter (multiprocessing's forkserver: never forked
-from a process holding CUDA or threads), and serves every later job of a basic launcher's sweep. The workers' CPU
-time is the sweep's own: the contention check of a timed call (bench.harness.sizing.contended) does not count it as
-other processes'. They still share the host's memory and caches with the timed calls (docs/measurements/sweep.md).
+Off by default (`evaluation.workers=0`): the workers share the host with the timed calls, and on the H100 host that
+moved the methods' runtimes by +5-10 % (BP) and up to +80 % (a ~1 ms FSK median; docs/measurements/sweep.md), so
+rows scored beside workers are timed 'parallel' and tables show no runtime for them: for sweeps whose errors, not
+runtimes, are wanted. `auto` is N = min(cores - 2, MAX_AUTO_WORKERS) for a GPU job that runs alone, 0 where other
+jobs of the sweep share the machine (joblib, SLURM arrays) and on the CPU devices, whose methods use every core.
+The pool is started once per process, from a fresh interpreter (multiprocessing's forkserver: never forked from a
+process holding CUDA or threads), and serves every later job of a basic launcher's sweep.
 """
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
 
 MAX_AUTO_WORKERS = 6
-HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: workers beside them time them 'parallel'
+HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: 'auto' leaves them every core
 # what a worker imports before it takes work (in the fork server: once for all workers): scoring, the cell's HDF5,
 # the KD-trees and the depth previews' colour map
 _PRELOAD = ["bench.harness.workers", "bench.harness.store", "scipy.spatial", "matplotlib.cm"]
@@ -101,22 +101,23 @@ def _store(root: str):
 
 
 def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None
-                    ) -> tuple[dict, bytes | None, float]:
+                    ) -> tuple[dict, bytes | None, dict[str, float]]:
     """In a worker: score the reconstruction into `row` (its score columns), write the depth PNG, JSON and preview
     and, with a store, the cell (arrays, then the row). Returns (row, where there is no store to copy the arrays
-    from the cell's image, bench.harness.store.cell_image, else None, seconds spent)."""
+    from the cell's image, bench.harness.store.cell_image, else None, seconds spent on metrics and outputs)."""
     from bench.harness.store import cell_image
 
     started = time.perf_counter()
     scores, arrays = score(task)
     row.update(scores)
+    scored = time.perf_counter()
     write_depth(out_dir, stem, arrays["depth_m"], task.metric_grid)
     if store_root is not None:
         _store(store_root).put(row["key"], row, arrays, grid_attrs)
         image = None
     else:
         image = cell_image(arrays, grid_attrs)
-    return row, image, time.perf_counter() - started
+    return row, image, {"metrics": scored - started, "outputs": time.perf_counter() - scored}
 
 
 def pool_size(setting, device: str, shared: bool = False) -> int:
@@ -157,16 +158,3 @@ def done(value) -> Future:
     future = Future()
     future.set_result(value)
     return future
-
-
-def workers_cpu_s() -> float:
-    """CPU seconds the pools' worker processes have used (/proc/<pid>/stat; 0 where there is no pool or no /proc)."""
-    total = 0
-    for process in multiprocessing.active_children():
-        try:
-            with open(f"/proc/{process.pid}/stat") as stat:
-                fields = stat.read().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        total += int(fields[11]) + int(fields[12])          # utime, stime (clock ticks)
-    return total / os.sysconf("SC_CLK_TCK") if total else 0.0

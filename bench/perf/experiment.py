@@ -5,8 +5,8 @@
 dataset.root=DIR device=D` (one job at a time, as the demo runs it) in a fresh process with the stage clock on
 (bench.harness.stages): seconds in composing the jobs' configurations, imports, reading captures, the ground
 truth, the methods (`methods.reconstruct` calls: prior, warm-up, method), the metrics, the output files (on the
-main thread: what it waited for; `outputs (background)` is the writer thread's time, overlapped; with scoring
-workers, bench.harness.workers, `metrics` is theirs: their metrics and depth files, overlapped), the merge
+main thread: what it waited for; `outputs (background)` is the writer thread's and the scoring workers' time,
+overlapped; with scoring workers, bench.harness.workers, the metrics are theirs, overlapped), the merge
 (tables and plots), and `other` (the interpreter, Hydra's start and its first composition, job set-up).
 Runs: `cold`, a store that keeps nothing yet (the ground truth is cast from the meshes), then `--repeat` runs
 `kept` on the store it left with its cells removed (every cell computes again; the ground truth kept by content

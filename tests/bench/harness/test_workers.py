@@ -1,9 +1,8 @@
 """Captures scored in worker processes (bench.harness.workers): the same rows, depth files, arrays and store cells as
-scored in the main thread, and the workers' CPU time is the sweep's own."""
+scored in the main thread, their runtimes labelled as taken beside other work; a run whose last files are deferred."""
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import h5py
@@ -74,16 +73,8 @@ def test_rows_and_files_scored_by_workers_are_those_scored_in_the_main_thread(ro
                 _stable(pd.DataFrame([json.loads(a.read_text())])))
         again = _run(root, tmp_path / "again", stores[1], 1)
         assert all(r["cached"] for r in again)
-    # on the CPU device the workers share the cores of the timed calls: never a runtime measured alone
+    # the workers share the host with the timed calls: never a runtime measured alone
     assert {r["timing"] for r in rows[1]} == {"parallel"} and {r["timing"] for r in rows[0]} <= {"alone", "contended"}
-
-
-def test_a_workers_cpu_time_is_counted_as_the_sweeps_own():
-    pool = workers.pool(1)
-    pool.submit(int).result()                     # started
-    before = workers.workers_cpu_s()
-    pool.submit(_spin, 0.3).result()
-    assert workers.workers_cpu_s() - before >= 0.2
 
 
 def test_pool_sizes():
@@ -91,12 +82,6 @@ def test_pool_sizes():
     assert 0 <= workers.pool_size("auto", "cuda") <= workers.MAX_AUTO_WORKERS
     assert workers.pool_size("auto", "cuda", shared=True) == 0          # jobs side by side: their cores
     assert workers.pool_size(3, "cpu") == 3
-
-
-def _spin(seconds: float) -> None:
-    end = time.process_time() + seconds
-    while time.process_time() < end:
-        pass
 
 
 def test_a_run_that_defers_its_files_is_complete_once_they_are_finished(root, tmp_path):
