@@ -370,7 +370,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     antenna_files = _antenna_files(cfg)
     identity = _identity(cfg, method, params)
     out_dir.mkdir(parents=True, exist_ok=True)
-    pool = workers.pool(workers.pool_size(OmegaConf.select(cfg, "evaluation.workers", default="auto"), device,
+    pool = workers.pool(workers.pool_size(OmegaConf.select(cfg, "evaluation.workers", default=0), device,
                                           shared=timing == "parallel"))
     if pool is not None:
         timing = "parallel"              # the workers share the host with the timed calls (bench.harness.workers)

@@ -169,7 +169,7 @@ def check(cfg: DictConfig, memory: bool = True) -> None:
     if cfg.profile.prior not in PROFILE_PRIORS:
         _fail("profile.prior", cfg.profile.prior, " or ".join(PROFILE_PRIORS))
     boolean("metrics.faithful", cfg.metrics.faithful)
-    workers = OmegaConf.select(cfg, "evaluation.workers", default="auto")
+    workers = OmegaConf.select(cfg, "evaluation.workers", default=0)
     if workers != "auto":
         number("evaluation.workers", workers, 0, 4 * (os.cpu_count() or 1), whole=True)
     if memory:
