@@ -14,6 +14,11 @@ if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
 
+#: threads of a nearest-neighbour query: every core where the process scores alone; scoring worker processes set
+#: 1 (bench.harness.workers), so that a pool of them does not start a thread per core each beside the timed calls
+QUERY_THREADS = -1
+
+
 @dataclass
 class PointSet:
     """(N, 3) points in metres with their KD-tree, built on first use."""
@@ -37,7 +42,7 @@ class PointSet:
 
 def nearest_distances_m(src_m: np.ndarray, dst: PointSet) -> np.ndarray:
     """Distance (m) from every source point to its nearest destination point; (N,) float64."""
-    distances, _ = dst.tree.query(np.asarray(src_m, dtype=np.float64), k=1, workers=-1)
+    distances, _ = dst.tree.query(np.asarray(src_m, dtype=np.float64), k=1, workers=QUERY_THREADS)
     return distances
 
 

@@ -408,14 +408,14 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                                  tuple(map(int, attrs["grid_size"])))
                 result = workers.done((row, arrays, {}))
             rows.append({"object": row["object"], "distance": row["distance"], "cached": hit is not None})
-            writer.submit(_finish, result, rows[-1], out_dir, grid, store, key, results_csv,
+            writer.submit(_finish, result, rows, len(rows) - 1, out_dir, grid, store, key, results_csv,
                           hit is None and pool is not None, job_log)
     except BaseException:
         with stages.stage("outputs"):
             writer.close()
         raise
     if defer_outputs:
-        outputs.defer(writer)
+        outputs.defer(writer, out_dir)
     else:
         with stages.stage("outputs"):
             writer.close()
@@ -444,16 +444,17 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
                        None if store is None else str(store.root))
 
 
-def _finish(result, entry: dict, out_dir: Path, grid: RadarGrid, store: Store | None, key: str | None,
-            results_csv: ResultsCsv, by_worker: bool, job_log) -> None:
+def _finish(result, rows: list[dict], index: int, out_dir: Path, grid: RadarGrid, store: Store | None,
+            key: str | None, results_csv: ResultsCsv, by_worker: bool, job_log) -> None:
     """On the writer thread, in capture order: the capture's scored row (waiting for its worker, which wrote its
-    depth files: `by_worker`) into its `entry` of the run's rows, and its files (`_write_outputs`)."""
+    depth files: `by_worker`) as entry `index` of the run's `rows`, and its files (`_write_outputs`)."""
     row, arrays, worker_s = result.result()
     for stage, seconds in worker_s.items():
         stages.add_background(stage, seconds)
-    cached = entry["cached"]
-    entry.clear()
-    entry.update(row, cached=cached)            # in the row's column order, `cached` last
+    # one item assignment: a reader of `rows` on another thread sees the placeholder or the whole row, never a half
+    cached = rows[index]["cached"]
+    entry = {**row, "cached": cached}
+    rows[index] = entry
     _write_outputs(out_dir, entry, arrays, grid, store, key, results_csv, depth_written=by_worker)
     if not cached:
         job_log("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],

@@ -125,19 +125,25 @@ class ResultsCsv:
                             .encode())
 
 
-_DEFERRED: list[BackgroundWriter] = []
+_DEFERRED: list[tuple[BackgroundWriter, Path]] = []
 
 
-def defer(writer: BackgroundWriter) -> None:
-    """Let `writer` finish while the process goes on (the next job of a basic launcher's sweep): `finish_deferred`
-    waits for it, as does the interpreter's exit."""
-    _DEFERRED.append(writer)
+def defer(writer: BackgroundWriter, out_dir: Path) -> None:
+    """Let `writer` (the outputs of the run in `out_dir`) finish while the process goes on (the next job of a
+    basic launcher's sweep); `finish_deferred` waits for it."""
+    _DEFERRED.append((writer, out_dir))
 
 
 def finish_deferred() -> None:
-    """Wait for the deferred writers (their first error is raised here)."""
+    """Wait for the deferred writers; the first error is raised here, noted with the run whose outputs failed (the
+    caller is the next job, or the end of the sweep)."""
     while _DEFERRED:
-        _DEFERRED.pop(0).close()
+        writer, out_dir = _DEFERRED.pop(0)
+        try:
+            writer.close()
+        except Exception as err:
+            err.add_note(f"while writing the outputs of the run in {out_dir}")
+            raise
 
 
 class BackgroundWriter:

@@ -66,6 +66,7 @@ class Pickled:
         return pickle.loads, (self.data,)
 
 
+SHIPPED_KEPT = 4        # as many as the ground truths the harness keeps (app._ground_truth's cache)
 _SHIPPED: dict[int, tuple[GroundTruth, Pickled]] = {}
 
 
@@ -74,8 +75,9 @@ def shipped(gt: GroundTruth | None) -> GroundTruth | Pickled | None:
     if gt is None:
         return None
     if id(gt) not in _SHIPPED:
-        if len(_SHIPPED) >= 32:
+        if len(_SHIPPED) >= SHIPPED_KEPT:
             _SHIPPED.pop(next(iter(_SHIPPED)))
+        _ = gt.points.tree         # built before pickling, so every task unpickles it instead of building it anew
         _SHIPPED[id(gt)] = gt, Pickled(pickle.dumps(gt, protocol=pickle.HIGHEST_PROTOCOL))
     return _SHIPPED[id(gt)][1]
 
@@ -140,11 +142,18 @@ def pool(workers: int) -> ProcessPoolExecutor | None:
     if workers not in _POOLS:
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
-        _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context)
+        _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context, initializer=_one_query_thread)
         # its processes started by another thread: the fork server's imports (~1 s) and the workers' starts happen
         # while this one goes on (Warp's start, reading, the first reconstruction), not when it hands over work
         threading.Thread(target=_start, args=(_POOLS[workers], workers), name="workers-start", daemon=True).start()
     return _POOLS[workers]
+
+
+def _one_query_thread() -> None:
+    """A worker's nearest-neighbour queries on one thread (the pool's processes already share the cores)."""
+    from metrics import chamfer
+
+    chamfer.QUERY_THREADS = 1
 
 
 def _start(pool: ProcessPoolExecutor, workers: int) -> None:

@@ -3,6 +3,8 @@ scored in the main thread, their runtimes labelled as taken beside other work; a
 from __future__ import annotations
 
 import json
+import threading
+import time
 from pathlib import Path
 
 import h5py
@@ -77,9 +79,11 @@ def test_rows_and_files_scored_by_workers_are_those_scored_in_the_main_thread(ro
     assert {r["timing"] for r in rows[1]} == {"parallel"} and {r["timing"] for r in rows[0]} <= {"alone", "contended"}
 
 
-def test_pool_sizes():
+@pytest.mark.parametrize(("cores", "expected"), [(16, workers.MAX_AUTO_WORKERS), (5, 3), (2, 0), (None, 0)])
+def test_pool_sizes(monkeypatch, cores, expected):
+    monkeypatch.setattr(workers.os, "cpu_count", lambda: cores)
+    assert workers.pool_size("auto", "cuda") == expected
     assert workers.pool_size("auto", "cpu") == 0
-    assert 0 <= workers.pool_size("auto", "cuda") <= workers.MAX_AUTO_WORKERS
     assert workers.pool_size("auto", "cuda", shared=True) == 0          # jobs side by side: their cores
     assert workers.pool_size(3, "cpu") == 3
 
@@ -92,6 +96,41 @@ def test_a_run_that_defers_its_files_is_complete_once_they_are_finished(root, tm
     pd.testing.assert_frame_equal(_stable(pd.DataFrame(rows)), reference)
     pd.testing.assert_frame_equal(_stable(pd.read_csv(tmp_path / "deferred" / "results.csv")),
                                   _stable(pd.read_csv(tmp_path / "reference" / "results.csv")))
+
+
+def test_a_later_run_computes_only_after_the_files_an_earlier_run_deferred(root, tmp_path, monkeypatch):
+    from bench.harness import app
+
+    gate, waiting, computed_after_gate = threading.Event(), threading.Event(), []
+    write, compute, finish = app._write_outputs, app._computed_row, app.outputs.finish_deferred
+
+    def held_write(out_dir, *args, **kwargs):               # the first run's files wait for the gate
+        if out_dir.name == "first":
+            assert gate.wait(60)
+        return write(out_dir, *args, **kwargs)
+
+    def noted_compute(*args, **kwargs):
+        computed_after_gate.append(gate.is_set())
+        return compute(*args, **kwargs)
+
+    def noted_finish():
+        waiting.set()
+        finish()
+
+    def release():                                          # the gate opens once the second run waits
+        if waiting.wait(60):
+            time.sleep(0.2)
+            gate.set()
+
+    monkeypatch.setattr(app, "_write_outputs", held_write)
     first = _run(root, tmp_path / "first", None, 1, defer=True)
-    _run(root, tmp_path / "second", None, 0)          # a later run waits for the earlier one's files first
+    monkeypatch.setattr(app, "_computed_row", noted_compute)
+    monkeypatch.setattr(app.outputs, "finish_deferred", noted_finish)
+    threading.Thread(target=release, daemon=True).start()
+    try:
+        _run(root, tmp_path / "second", None, 0)
+    finally:
+        gate.set()
+        finish()
+    assert computed_after_gate == [True, True]
     assert all("P_cm" in row for row in first) and len(pd.read_csv(tmp_path / "first" / "results.csv")) == 2
