@@ -418,11 +418,11 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
                         Patch(color=error_map(1.0), label="error > 0: behind the surface"),
                         Patch(color=error_map(0.0), label="error < 0: in front of it")],
                loc="upper center", fontsize=7, frameon=False, borderaxespad=0)
-    for number, (drawn, bar_label, extend) in enumerate((
-            (depth_drawn, "depth z (cm)", "neither"),
-            (level_drawn if cells else depth_drawn, "magnitude (dB re strongest pixel)", "min"),
-            (error_drawn if cells else depth_drawn, f"signed error (cm), saturates at ±{SIGNED_ERROR_LIMIT_CM:g}",
-             "both"))):
+    bars = [(depth_drawn, "depth z (cm)", "neither")]
+    if cells:                    # a panel of the ground truth and prior alone has no magnitude or error maps
+        bars += [(level_drawn, "magnitude (dB re strongest pixel)", "min"),
+                 (error_drawn, f"signed error (cm), saturates at ±{SIGNED_ERROR_LIMIT_CM:g}", "both")]
+    for number, (drawn, bar_label, extend) in enumerate(bars):
         bar = fig.colorbar(drawn, cax=key.inset_axes((0.05, 0.52 - 0.24 * number, 0.9, 0.05)),
                            orientation="horizontal", extend=extend)
         bar.set_label(bar_label, fontsize=7)

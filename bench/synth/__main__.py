@@ -38,9 +38,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-clutter", action="store_true", help="raw frames without empty-room clutter")
     p.add_argument("--force", action="store_true", help="regenerate even when the cache is up to date")
     p.add_argument("--device", default="cpu",
-                   help="where the radar sums run: cpu (NumPy, the default: the same files on every machine) or cuda "
+                   help="where the radar sums run: cpu (NumPy, the default: the same files on every machine), cuda "
                         "(Warp on the GPU: frames within a stated tolerance, docs/guide/synth.md; recorded in the "
-                        "manifest and part of the cache key)")
+                        "manifest and part of the cache key), warp-cpu (the same kernels on the CPU) or auto "
+                        "(cuda where a GPU is seen, else cpu)")
     return p
 
 

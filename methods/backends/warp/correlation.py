@@ -13,8 +13,6 @@ from methods.backends.warp.frames import C_M_PER_S, BufferPool, FrameCache, Fram
 from methods.backends.warp.kernels import correlation as kernels
 from methods.ops import range_compression
 
-KERNELS = ("tc", "tc3", "separable", "direct", "range", "columns")
-
 
 def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
     """Bounds of |p - rx| + |p - tx| over the box of the grid and all pairs, metres."""
@@ -65,8 +63,9 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
                 inputs: FrameInputs | None = None, term_tol: float = columns.TERM_TOL, count: wp.array | None = None):
     """Upload inputs once; return a function that runs `kernel` and returns the device output (rows, N) vec2f.
 
-    kernel: "tc" (tensor cores, fp16 operands), "tc3" (tensor cores, split fp16 operands: CUDA only; ~fp32
-    operand precision at ~? the time of "tc"), "separable" (fp32), "direct", "range" (frequency sum only; the
+    kernel: "tc" (tensor cores, fp16 operands), "tc3" (tensor cores, split fp16 operands: CUDA only; close to
+    fp32 operand precision at ~1.7x the time of "tc": docs/measurements/formation.md section 7), "separable"
+    (fp32), "direct", "range" (frequency sum only; the
     range profiles are rebuilt on every call, as a new frame needs, over the paths the grid's or the points' box
     can reach) or "columns" (grids only: the column-separable sum of `columns` with the rho step of `term_tol`,
     tables rebuilt on every call).
