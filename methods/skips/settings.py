@@ -65,8 +65,8 @@ class SkipSettings:
     roi_lattice_step_m: float = 0.004  # coarse_roi's lattice (BP): a pixel every 4 mm (1/16 of 1 mm pixels) ...
     roi_keep_margin_db: float = 6.0   # ... marking its neighbourhood when within threshold + 6 dB of the max
     roi_margin_m: float = 0.01        # the coarse ROI's depth range: lattice peaks +- (lattice depth step + 1 cm)
-    roi_prepass_margin_db: float = -1.0  # >= 0: the host's coarse ROI pass on every 2nd lattice pixel first, the
-    #                                   others near those within threshold + roi_keep_margin_db + this (< 0: off)
+    roi_prepass_margin_db: float = 3.0  # >= 0: the host's coarse ROI pass on every 2nd lattice pixel first, the
+    #                                   others next to those within threshold + roi_keep_margin_db + this (< 0: off)
     psf_max_loss_db: float = 3.0      # coarse depth step: largest with <= 3 dB point-target loss at half a step
     max_coarse_step_m: float = 0.01   # ... and at most 1 cm
     candidate_margin_db: float = 1.0  # refine coarse samples within (that loss + 1 dB) of the pixel's coarse max
@@ -98,6 +98,7 @@ class SkipSettings:
         return dataclasses.replace(self, **{n: n == name for n in SKIP_NAMES})
 
 
+LOCAL_Z_MIN_FREQS = 16           # BP's host search uses the coarse ROI's local depth windows from this many on
 NONE = SkipSettings()
 ALL = SkipSettings(**dict.fromkeys(SKIP_NAMES, True))
 PRESETS = ("none", "auto", "all")
@@ -128,7 +129,9 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False, kee
     if method == "bp":
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True, bp_dense_z_search=n_freqs == 2)
-        return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True)
+        # local depth windows where the profiles are sharp (many frequencies; measured on BP_max: formation.md 7)
+        return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True,
+                            search_local_z=n_freqs >= LOCAL_Z_MIN_FREQS)
     if dense_beats_search:
         return SkipSettings(mask_bb=True, fsk_keep=keeps_on_device)
     return SkipSettings(mask_bb=True, fsk_keep=True)
