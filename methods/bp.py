@@ -11,10 +11,11 @@ and pixels without a prior stay NaN.
 
 Region of interest and skips (methods.skips.roi, methods.skips.settings): with an ROI, only its pixels and depths are
 evaluated (the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device,
-through the point kernels; on the host with local-maximum candidates and a 2 mm pixel lattice) and, on the CPU with
-many frequencies, on range-compressed profiles (methods.skips.bp_search, methods.backends.cpu_range); with many
-frequencies on CUDA the coarse ROI's pass and the whole search run on the device (`Backend.coarse_peaks`,
-`Backend.search_depth`: the host's rules without its two shortcuts, so its depths are those of the host search
+through the point kernels; on the host with local-maximum candidates, a 2 mm pixel lattice, the coarse ROI's pass
+in two passes and, with many frequencies, each pixel's coarse samples within the coarse ROI's local depths) and, on
+the CPU with many frequencies, on range-compressed profiles (methods.skips.bp_search, methods.backends.cpu_range);
+with many frequencies on CUDA the coarse ROI's pass and the whole search run on the device (`Backend.coarse_peaks`,
+`Backend.search_depth`: the host's rules without its shortcuts, so its depths are those of the host search
 with the shortcuts off, and within the skip rule of those with them on). With no ROI
 and no skip (`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
