@@ -268,8 +268,9 @@ def reconstruct_bp(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaAr
         host_range = backend.host_range_search and skips.bp_range_cpu and cpu_range.worth_it(freqs_hz)
         searched = skips.coarse_roi or skips.bp_coarse_to_fine or host_range
         if searched or (roi_cuts and not backend.prefers_box_volume):
-            depth_m, max_proj = _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi, skips,
-                                                  threshold_db, backend, timer, extra)
+            with backend.holding_frame(signal):        # the search looks the frame up several times
+                depth_m, max_proj = _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi,
+                                                      skips, threshold_db, backend, timer, extra)
         elif roi_cuts:
             depth_m, max_proj = _warp_roi_depth_m(signal, freqs_hz, antennas, grid, z_m, dz_m, roi, backend, timer,
                                                   extra, skips, threshold_db)

@@ -68,10 +68,10 @@ def memoise_radar() -> None:
     from bench.synth import generate as gen
     memo, frames = {}, gen._radar_frames
 
-    def memo_frames(scene, config, rng):
-        key = (scene.name, config.seed, config.frequency_points)
+    def memo_frames(scene, config, rng, device="cpu"):
+        key = (scene.name, config.seed, config.frequency_points, device)
         if key not in memo:
-            memo[key] = [(a.copy(), b.copy()) for a, b in frames(scene, config, rng)]
+            memo[key] = [(a.copy(), b.copy()) for a, b in frames(scene, config, rng, device)]
         yield from memo[key]
     gen._radar_frames = memo_frames
 

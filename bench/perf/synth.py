@@ -1,14 +1,15 @@
 """Synthetic capture generation, by stage, with the radar echo from frequency nodes and computed at every frequency.
 
 `python -m bench.perf synth [--objects NAME ...] [--distance CM] [--preset realistic|ideal] [--paths nodes direct]
-[--out DIR]` builds each capture (`bench.synth.generate.build_capture`, into a temporary folder, no cache) once per
-path: `nodes` is the generator as it is (each block of scatterers at a few node frequencies, interpolated:
-bench.synth.radar.frequency_nodes), `direct` computes every frequency (what generator version 7 did, per-frequency
-products). Stages are timed where the generator calls them, wall and process CPU seconds (all threads): the surface
-samples (ray casting), the radar echo (`simulate_frame`, multipath, wall), the depth camera, the ground-truth mesh,
-writing files; `other` is the rest (scene, noise, sums). With both paths, each capture's radar frames are compared
-(same seeds, so the same noise): the largest difference over the peak, and the rms difference against the
-thermal noise of the frames in dB. Writes OUT/perf_synth.csv (OUT: `--out`, default outputs/perf).
+[--device cpu|cuda] [--out DIR]` builds each capture (`bench.synth.generate.build_capture`, into a temporary
+folder, no cache) once per path: `nodes` is the generator as it is (each block of scatterers at a few node
+frequencies, interpolated: bench.synth.radar.frequency_nodes), `direct` computes every frequency (what generator
+version 7 did, per-frequency products); `--device` is where the radar sums run (as `python -m bench.synth
+--device`), on either path. Stages are timed where the generator calls them, wall and process CPU seconds (all
+threads): the surface samples (ray casting), the radar echo (`simulate_frame`, multipath, wall), the depth camera,
+the ground-truth mesh, writing files; `other` is the rest (scene, noise, sums). With both paths, each capture's radar
+frames are compared (same seeds, so the same noise): the largest difference over the peak, and the rms difference
+against the thermal noise of the frames in dB. Writes OUT/perf_synth.csv (OUT: `--out`, default outputs/perf).
 
 `--workers N [N ...]` times instead what a user waits for: `generate_catalogue` of the objects at the distance into
 a fresh root, building N captures at once (default: as many as the generator builds, `capture_workers()`), wall and
@@ -82,7 +83,7 @@ def radar_path(path: str):
         frequency_nodes.MAX_NODE_SHARE = share
 
 
-def build(object_name: str, distance_cm: int, config, path: str, work: Path) -> dict:
+def build(object_name: str, distance_cm: int, config, path: str, work: Path, device: str = "cpu") -> dict:
     """Build one capture on `path` into `work`; its row: wall and CPU seconds in all and per stage."""
     from bench.synth.generate import build_capture
 
@@ -90,9 +91,9 @@ def build(object_name: str, distance_cm: int, config, path: str, work: Path) -> 
     target = work / path / object_name
     with radar_path(path), timed_stages(spent):
         wall, cpu = time.perf_counter(), time.process_time()
-        build_capture(target, object_name, distance_cm, config)
+        build_capture(target, object_name, distance_cm, config, device)
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-    row = {"path": path, "capture": f"{object_name}/{distance_cm}", "wall_s": wall, "cpu_s": cpu}
+    row = {"path": path, "device": device, "capture": f"{object_name}/{distance_cm}", "wall_s": wall, "cpu_s": cpu}
     for stage in STAGES:
         row[f"{stage}_wall_s"], row[f"{stage}_cpu_s"] = spent[stage]
     row["other_s"] = wall - sum(spent[s][0] for s in STAGES)
@@ -117,7 +118,7 @@ def frame_difference(nodes_dir: Path, direct_dir: Path, config) -> dict:
             "rms_diff_over_noise_db": 20.0 * np.log10(rms / noise) if rms > 0 and noise > 0 else float("nan")}
 
 
-def catalogue(objects: list[str], distance_cm: int, config, workers: int, work: Path) -> dict:
+def catalogue(objects: list[str], distance_cm: int, config, workers: int, work: Path, device: str = "cpu") -> dict:
     """Wall and CPU seconds of generate_catalogue into a fresh root, `workers` captures at once."""
     from bench.synth import generate
 
@@ -126,12 +127,13 @@ def catalogue(objects: list[str], distance_cm: int, config, workers: int, work: 
     try:
         wall, cpu = time.perf_counter(), time.process_time()
         generate.generate_catalogue(Path(tempfile.mkdtemp(prefix=f"workers{workers}-", dir=work)), [distance_cm],
-                                    objects, config)
+                                    objects, config, device=device)
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     finally:
         generate.capture_workers = default
-    print(f"generate_catalogue: {len(objects)} captures, {workers} at once: {wall:.1f} s wall, {cpu:.1f} s CPU")
-    return {"captures": len(objects), "workers": workers, "wall_s": wall, "cpu_s": cpu}
+    print(f"generate_catalogue ({device}): {len(objects)} captures, {workers} at once: {wall:.1f} s wall, "
+          f"{cpu:.1f} s CPU")
+    return {"device": device, "captures": len(objects), "workers": workers, "wall_s": wall, "cpu_s": cpu}
 
 
 def _print(rows: list[dict]) -> None:
@@ -160,8 +162,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--paths", nargs="+", choices=PATHS, default=list(PATHS), help="radar paths to time")
     parser.add_argument("--workers", type=cli.positive_int, nargs="*", default=None,
                         help="time generate_catalogue building this many captures at once (none given: the default)")
+    parser.add_argument("--device", default="cpu", help="where the radar sums run: cpu (NumPy) or cuda (Warp)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="folder for the CSV")
     args = parser.parse_args(argv)
+    device = cli.resolve_device(args.device)
     unknown = [o for o in args.objects if o not in CATALOGUE]
     if unknown:
         parser.error(f"unknown object(s) {', '.join(unknown)}; known: {', '.join(CATALOGUE)}")
@@ -172,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
         from bench.synth.generate import capture_workers
 
         with tempfile.TemporaryDirectory(prefix="perf-synth-") as tmp:
-            rows = [catalogue(args.objects, args.distance, config, n, Path(tmp)) for n in args.workers or
+            rows = [catalogue(args.objects, args.distance, config, n, Path(tmp), device) for n in args.workers or
                     [capture_workers()]]
         write_rows(rows, args.out / "perf_synth_catalogue.csv")
         return 0
@@ -180,8 +184,9 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="perf-synth-") as tmp:
         work = Path(tmp)
         for path in args.paths:
-            captures = [build(o, args.distance, config, path, work) for o in each(args.objects, path, unit="capture")]
-            total = {"path": path, "capture": f"total ({len(captures)})"}
+            captures = [build(o, args.distance, config, path, work, device)
+                        for o in each(args.objects, path, unit="capture")]
+            total = {"path": path, "device": device, "capture": f"total ({len(captures)})"}
             total.update({k: sum(r[k] for r in captures) for k in captures[0] if k.endswith("_s")})
             rows += captures + [total]
         if set(PATHS) <= set(args.paths):

@@ -1,7 +1,8 @@
 """Command line: `python -m bench.synth --out DIR [--preset realistic|ideal] [--distances 30 40 50] [--objects ...]
 [--catalogue demo|full] [--frames N] [--motion static|lateral|approach] [--motion-speed M_S]
-[--snr-db X] [--seed S] [--no-clutter] [--force]`. Prints one line per capture; bad arguments or an output folder
-that cannot be written give a one-line error and exit code 2 (bench.cli)."""
+[--snr-db X] [--seed S] [--no-clutter] [--force] [--device cpu|cuda]`. Prints one line per capture; bad arguments,
+an output folder that cannot be written or a device this machine lacks give a one-line error and exit code 2
+(bench.cli)."""
 from __future__ import annotations
 
 import argparse
@@ -36,6 +37,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=SynthConfig.seed)
     p.add_argument("--no-clutter", action="store_true", help="raw frames without empty-room clutter")
     p.add_argument("--force", action="store_true", help="regenerate even when the cache is up to date")
+    p.add_argument("--device", default="cpu",
+                   help="where the radar sums run: cpu (NumPy, the default: the same files on every machine) or cuda "
+                        "(Warp on the GPU: frames within a stated tolerance, docs/guide/synth.md; recorded in the "
+                        "manifest and part of the cache key)")
     return p
 
 
@@ -60,6 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
 
+    device = cli.resolve_device(args.device)
     from bench.progress import bar
 
     progress = bar(len(objects) * len(args.distances), "captures", unit="capture")
@@ -71,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     try:
         with progress:
-            results = generate_catalogue(args.out, args.distances, objects, config, args.force, log)
+            results = generate_catalogue(args.out, args.distances, objects, config, args.force, log, device=device)
     except OSError as err:
         raise cli.UserError(args.out, f"cannot write the dataset there ({err.strerror or err})") from None
     generated = sum(r.status == "generated" for r in results)

@@ -137,10 +137,13 @@ class SynthConfig:
         return dataclasses.asdict(self)
 
 
-def capture_hash(config: SynthConfig, object_name: str, distance_cm: int) -> str:
-    """Cache key of one capture: generator version + full config + object + distance."""
+def capture_hash(config: SynthConfig, object_name: str, distance_cm: int, device: str = "cpu") -> str:
+    """Cache key of one capture: generator version + full config + object + distance, + the device of the radar
+    sums where it is not the default "cpu" (so that the keys of NumPy captures stay what they were)."""
     payload = {"version": GENERATOR_VERSION, "config": config.to_dict(), "object": object_name,
                "distance_cm": int(distance_cm)}
+    if device != "cpu":
+        payload["device"] = device
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
 
 

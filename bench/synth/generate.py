@@ -33,6 +33,9 @@ from bench.synth.radar.leg_sum import PARTIAL_SUMS, single_threaded_blas
 from bench.synth.scenes import CATALOGUE, FULL_CATALOGUE, build_scene
 
 MANIFEST_NAME = ownership.MANIFEST_NAME
+# where the radar sums run: "cpu" NumPy (the default: the demo's data do not depend on the machine), "cuda" and
+# "warp-cpu" Warp (bench.synth.radar.warp_sum; frames within docs/measurements/synth.md's tolerance of NumPy's)
+RADAR_DEVICES = ("cpu", "cuda", "warp-cpu")
 DEFAULT_DISTANCES_CM = (30, 40, 50)
 START_TIME_NS = 1_700_000_000_000_000_000
 FRAME_PERIOD_NS = 33_333_333          # 30 fps RealSense; radar frames stamped at the same instants
@@ -59,9 +62,9 @@ def _photogrammetry2radar(rng: np.random.Generator) -> np.ndarray:
     return _rigid(rotation_matrix(rng.normal(size=3), rng.uniform(25.0, 60.0)), rng.uniform(-0.5, 0.5, 3))
 
 
-def _radar_frames(scene, config: SynthConfig, rng: np.random.Generator):
-    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame (bench.synth.radar.scene)."""
-    return radar_scene.frames(scene, config, rng)
+def _radar_frames(scene, config: SynthConfig, rng: np.random.Generator, device: str = "cpu"):
+    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame (bench.synth.radar.scene), summed on `device`."""
+    return radar_scene.frames(scene, config, rng, device)
 
 
 def _registration_residual(config: SynthConfig, rng: np.random.Generator) -> np.ndarray:
@@ -75,8 +78,10 @@ def _registration_residual(config: SynthConfig, rng: np.random.Generator) -> np.
                   direction / np.linalg.norm(direction) * config.gt_registration_mm * 1e-3)
 
 
-def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config: SynthConfig) -> None:
-    """Write every file of one capture into `capture_dir` (which must not exist yet)."""
+def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config: SynthConfig,
+                  device: str = "cpu") -> None:
+    """Write every file of one capture into `capture_dir` (which must not exist yet); the radar sums on `device`
+    (RADAR_DEVICES)."""
     distance_m = distance_cm / 100.0
     scene = build_scene(object_name, distance_m)
     if config.mount:
@@ -86,7 +91,10 @@ def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config:
 
     radar_rng = capture_rng(config, object_name, distance_cm, "radar")
     freqs = frequencies_hz(config)
-    for i, (raw, filtered) in enumerate(motion.radar_frames(_radar_frames, scene, config, sequence, radar_rng)):
+    def simulate(scene_, config_, rng_):
+        return _radar_frames(scene_, config_, rng_, device)
+
+    for i, (raw, filtered) in enumerate(motion.radar_frames(simulate, scene, config, sequence, radar_rng)):
         writer.write_radar_frame(capture_dir, i, raw, filtered, freqs, config.frames,
                                  sequence.radar_times_ns[i] // 1000)
     writer.write_radar_calibration(capture_dir, writer.radar_grid(distance_m), config.frames, config.frequency_points)
@@ -149,8 +157,10 @@ def _remove_stale_temporaries(object_dir: Path, distance_cm: int) -> None:
             shutil.rmtree(entry, ignore_errors=True)
 
 
-def _check(object_name: str, distance_cm: int, config: SynthConfig) -> None:
+def _check(object_name: str, distance_cm: int, config: SynthConfig, device: str = "cpu") -> None:
     config.validate()
+    if device not in RADAR_DEVICES:
+        raise ValueError(f"device {device!r} is not one of {', '.join(RADAR_DEVICES)}")
     motion.validate(config)
     if object_name not in FULL_CATALOGUE:
         raise ValueError(f"unknown object {object_name!r}; known: {', '.join(FULL_CATALOGUE)}")
@@ -159,11 +169,11 @@ def _check(object_name: str, distance_cm: int, config: SynthConfig) -> None:
 
 
 def _ensure_locked(root: Path, object_name: str, distance_cm: int, config: SynthConfig,
-                   force: bool) -> CaptureResult:
+                   force: bool, device: str = "cpu") -> CaptureResult:
     """ensure_capture's work; the caller has claimed `root` and holds its lock."""
     start = time.perf_counter()
     target = root / object_name / str(int(distance_cm))
-    key, digest = f"{object_name}/{int(distance_cm)}", capture_hash(config, object_name, distance_cm)
+    key, digest = f"{object_name}/{int(distance_cm)}", capture_hash(config, object_name, distance_cm, device)
     manifest = _Manifest(root)
     recorded = manifest.read().get(key, {})
     if not force and target.is_dir() and recorded.get("hash") == digest:
@@ -175,7 +185,7 @@ def _ensure_locked(root: Path, object_name: str, distance_cm: int, config: Synth
     token = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
     tmp = target.parent / f".{distance_cm}.tmp-{token}"
     try:
-        build_capture(tmp, object_name, int(distance_cm), config)
+        build_capture(tmp, object_name, int(distance_cm), config, device)
         if target.exists():
             old = target.parent / f".{distance_cm}.old-{token}"
             os.rename(target, old)
@@ -186,7 +196,7 @@ def _ensure_locked(root: Path, object_name: str, distance_cm: int, config: Synth
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     seconds = time.perf_counter() - start
-    manifest.record(key, {"hash": digest, "config": config.to_dict(), "seconds": round(seconds, 3),
+    manifest.record(key, {"hash": digest, "config": config.to_dict(), "device": device, "seconds": round(seconds, 3),
                           "content": ownership.content_digest(target)})
     return CaptureResult(target, "generated", seconds)
 
@@ -195,29 +205,32 @@ DEFAULT_CONFIG = SynthConfig()     # frozen: one shared default instance
 
 
 def ensure_capture(root, object_name: str, distance_cm: int, config: SynthConfig = DEFAULT_CONFIG,
-                   force: bool = False, on_wait: Callable[[], None] | None = None) -> CaptureResult:
+                   force: bool = False, on_wait: Callable[[], None] | None = None,
+                   device: str = "cpu") -> CaptureResult:
     """Generate one capture unless an up-to-date one (same hash in the manifest) already exists.
 
-    Raises ownership.ForeignRootError for a root with data the generator did not write.
+    `device` (RADAR_DEVICES) is where the radar sums run; it is part of the cache key unless "cpu" and recorded in
+    the manifest. Raises ownership.ForeignRootError for a root with data the generator did not write.
     """
-    _check(object_name, distance_cm, config)
+    _check(object_name, distance_cm, config, device)
     root = Path(root)
     ownership.claim(root)
     with ownership.exclusive(root, on_wait):
-        return _ensure_locked(root, object_name, int(distance_cm), config, force)
+        return _ensure_locked(root, object_name, int(distance_cm), config, force, device)
 
 
 def generate_capture(root, object_name: str, distance_cm: int, config: SynthConfig = DEFAULT_CONFIG,
-                     force: bool = False) -> Path:
+                     force: bool = False, device: str = "cpu") -> Path:
     """Path of the capture `<root>/<object_name>/<distance_cm>`, generated if missing or stale."""
-    return ensure_capture(root, object_name, distance_cm, config, force).path
+    return ensure_capture(root, object_name, distance_cm, config, force, device=device).path
 
 
 def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, objects: Iterable[str] | None = None,
                        config: SynthConfig = DEFAULT_CONFIG, force: bool = False,
                        log: Callable[[CaptureResult], None] | None = None,
-                       on_wait: Callable[[], None] | None = None) -> list[CaptureResult]:
-    """Ensure every (object, distance) capture; `objects=None` means the demo's catalogue (scenes.CATALOGUE).
+                       on_wait: Callable[[], None] | None = None, device: str = "cpu") -> list[CaptureResult]:
+    """Ensure every (object, distance) capture; `objects=None` means the demo's catalogue (scenes.CATALOGUE);
+    the radar sums on `device` (ensure_capture).
 
     Holds the root's lock throughout: a concurrent call waits (`on_wait()` is called once when it has to) and
     then finds the captures cached. Builds `capture_workers()` captures at once (threads; every capture draws from
@@ -226,7 +239,7 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
     """
     pairs = [(o, int(d)) for o in (list(objects) if objects is not None else list(CATALOGUE)) for d in distances]
     for object_name, distance_cm in pairs:
-        _check(object_name, distance_cm, config)
+        _check(object_name, distance_cm, config, device)
     root = Path(root)
     ownership.claim(root)
     unique = list(dict.fromkeys(pairs))       # a capture asked for twice is built once
@@ -235,7 +248,7 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
     # (its workers busy-wait); the captures' own threads use the cores
     with (ownership.exclusive(root, on_wait), single_threaded_blas(),
           ThreadPoolExecutor(min(capture_workers(), len(unique))) as pool):
-        futures = [pool.submit(_ensure_locked, root, o, d, config, force) for o, d in unique]
+        futures = [pool.submit(_ensure_locked, root, o, d, config, force, device) for o, d in unique]
         try:
             for pair, future in zip(unique, futures, strict=True):
                 done[pair] = future.result()

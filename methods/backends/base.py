@@ -15,6 +15,8 @@ holds the float64 reference every backend is tested against.
 """
 from __future__ import annotations
 
+from contextlib import AbstractContextManager, nullcontext
+
 import numpy as np
 
 from methods.domain.capture import DepthFrame, Mesh, RadarGrid
@@ -132,6 +134,11 @@ class Backend:
         ((depth_m, magnitude, prior_m) (ny, nx), prior offset m), the correlated pixels restricted to `roi_pixels`
         (ny, nx) bool; or None where this backend leaves it to the host."""
         return None
+
+    def holding_frame(self, signal: np.ndarray) -> AbstractContextManager:
+        """A block within which the caller's `signal` array stays unchanged, so a backend that caches frames by
+        content may find it by identity (nothing to do where nothing is cached)."""
+        return nullcontext()
 
     def warm_up(self, signal, freqs_hz, tx_m, rx_m, *, volume: bool, prior: bool) -> None:
         """Compile what a timed run will need (nothing to compile on the numpy backend)."""

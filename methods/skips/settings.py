@@ -129,7 +129,7 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False, kee
     if method == "bp":
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True, bp_dense_z_search=n_freqs == 2)
-        # local depth windows where the profiles are sharp (many frequencies; measured on BP_max: formation.md 7)
+        # local depth windows where the profiles are sharp (many frequencies; measured on BP_max: formation.md 8)
         return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True,
                             search_local_z=n_freqs >= LOCAL_Z_MIN_FREQS)
     if dense_beats_search:

@@ -117,6 +117,8 @@ DOC_RUNS: dict[str, list[str]] = {
         ["{py} -m bench.synth --help"],     # generating takes ~15-60 s a capture; bench.synth runs in test_synth_*
     "python -m bench.synth": ["{py} -m bench.synth --help"],
     ".venv/bin/python -m bench.synth --out data/synthetic --preset realistic --distances 30": ["{py} -m bench.synth --help"],
+    # the CUDA path's sums: tests/bench/synth/test_synth_warp.py (Warp-CPU here, CUDA on a GPU)
+    ".venv/bin/python -m bench.synth --out data/synthetic_cuda --distances 30 --device cuda": ["{py} -m bench.synth --help"],
     # the agreement report generates the catalogue and runs 19 cells (~15 min): its options are checked only
     ".venv/bin/python -m bench.report.agreement": ["{py} -m bench.report.agreement --help"],
     ".venv/bin/python -m bench.report.agreement --ablation --no-tables": ["{py} -m bench.report.agreement --help"],
@@ -214,6 +216,8 @@ MISTAKES = [
      EXIT_USER, "error: device=cuda: Warp sees no CUDA device (use device=cpu or device=auto)"),
     ("bench-device", "{py} -m bench device=gpu dataset=maroon dataset.root={empty} hydra.run.dir={tmp}/run",
      EXIT_USER, "error: device=gpu: unknown device (choose from cpu, cuda, auto, warp-cpu)"),
+    ("synth-cuda", "{py} -m bench.synth --out {tmp}/synth --device cuda",
+     EXIT_USER, "error: --device cuda: Warp sees no CUDA device (use --device cpu or --device auto)"),
     ("bench-missing-root", "{py} -m bench dataset=maroon dataset.root={missing} hydra.run.dir={tmp}/run",
      EXIT_USER, "error: {missing}: "),
     ("bench-run-dir", "{py} -m bench hydra.run.dir={file}/run", EXIT_USER,

@@ -83,6 +83,30 @@ def test_frame_cache_sees_in_place_changes_and_outputs_are_not_shared(device):
     assert rel_err(second, ref) < TOL[device]
 
 
+def test_a_held_frame_is_found_by_identity_and_only_within_its_block(monkeypatch):
+    from methods.backends.warp import frames
+
+    rng = np.random.default_rng()
+    signal, freqs_hz, _ = random_problem(rng, 1, 2)
+    signal = signal.astype(np.complex64)
+    cache = frames.FrameCache("cpu")
+    compared = []
+    equal = frames._equal
+    monkeypatch.setattr(frames, "_equal", lambda a, b: compared.append(a.size) or equal(a, b))
+    cache.inputs(signal, freqs_hz, ANT.tx_m, ANT.rx_m)             # cached by content before the block
+    with cache.held(signal):
+        first = cache.inputs(signal, freqs_hz, ANT.tx_m, ANT.rx_m)
+        compared.clear()
+        assert cache.inputs(signal, freqs_hz, ANT.tx_m, ANT.rx_m) is first
+        assert signal.size not in compared                          # the frame itself not compared again
+        other = cache.inputs(signal, freqs_hz[::-1].copy(), ANT.tx_m, ANT.rx_m)
+        assert other is not first                                   # the small arrays are still compared
+        copy = cache.inputs(signal.copy(), freqs_hz, ANT.tx_m, ANT.rx_m)
+        assert copy is first                                        # another object: found by content
+    signal[0, 0, 0] += 1.0                                          # outside the block: content decides again
+    assert cache.inputs(signal, freqs_hz, ANT.tx_m, ANT.rx_m) is not first
+
+
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
 def test_plain_direct_kernel_matches_reference(device):
     from methods.backends import backend_for

@@ -116,7 +116,7 @@ def test_roi_settings():
     assert resolve("auto", "bp", 3, True) == SkipSettings(mask_bb=True) == default_for("2fsk", 2, True)
     assert resolve("auto", "bp", 2, True) == SkipSettings(mask_bb=True, bp_dense_z_search=True)
     assert default_for("bp", 128, True).bp_coarse_to_fine and default_for("2fsk", 2, False).fsk_keep
-    # the host search's local depth windows with many frequencies only (sharp profiles; formation.md section 7)
+    # the host search's local depth windows with many frequencies only (sharp profiles; formation.md section 8)
     assert default_for("bp", 128).search_local_z and not default_for("bp", 2).search_local_z
     # ... but where the backend keeps inside its device graph (Warp on CUDA), fsk_keep pays there too
     assert resolve("auto", "3fsk", 3, True, True) == SkipSettings(mask_bb=True, fsk_keep=True)

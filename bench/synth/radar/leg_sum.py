@@ -14,6 +14,9 @@ PARTIAL_SUMS sums, added in a fixed order: results do not depend on the machine'
 contribution is computed on one process-wide pool of threads, one per core, shared by the captures built at once
 (a capture's blocks then use the cores other captures have finished with: the bowl's multipath is the catalogue's
 long pole), and added to its sum in block order.
+
+On a Warp device ("cuda" or "warp-cpu": bench.synth.radar.warp_sum) the same blocks and node fits are used; the
+legs, node sums, interpolation and the block order's additions (in float64) run on the device.
 """
 from __future__ import annotations
 
@@ -155,6 +158,26 @@ def leg_sum(legs: Legs, positions: np.ndarray, n_rx: int, n_tx: int, freqs_hz: n
     return np.ascontiguousarray(out.transpose(1, 2, 0))
 
 
+def block_nodes(path_m: np.ndarray, freqs_hz: np.ndarray,
+                n_rx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A block's centre path per antenna (E,) m, its node frequencies (M,) Hz and the fit (F, M) complex64 from the
+    nodes to every frequency (frequency_nodes.interpolator); fit None (the nodes are the frequencies) with the
+    centres 0."""
+    return nodes_of_bounds(path_m.min(axis=1), path_m.max(axis=1), freqs_hz, n_rx)
+
+
+def nodes_of_bounds(low: np.ndarray, high: np.ndarray, freqs_hz: np.ndarray,
+                    n_rx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """block_nodes from the block's shortest and longest path per antenna (E,) m."""
+    centre = 0.5 * (low + high)
+    # every pair's path lies within centre_rx + centre_tx +- (largest receive half-span + largest transmit one)
+    half_span = 0.5 * (high - low)
+    nodes_hz, fit = interpolator(freqs_hz, half_span[:n_rx].max() + half_span[n_rx:].max())
+    if fit is None:                 # direct: every frequency is a node, nothing to factor out
+        centre[:] = 0.0
+    return centre, nodes_hz, fit
+
+
 def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx: int,
               into: np.ndarray | None = None) -> np.ndarray | None:
     """One block's sum (F, n_rx, n_tx) complex64 (path_m, weight: (n_rx + n_tx, k), receive legs first; None for
@@ -163,13 +186,7 @@ def block_sum(path_m: np.ndarray, weight: np.ndarray, freqs_hz: np.ndarray, n_rx
     (0 + x is x)."""
     if path_m.shape[1] == 0:
         return None
-    low, high = path_m.min(axis=1), path_m.max(axis=1)
-    centre = 0.5 * (low + high)
-    # every pair's path lies within centre_rx + centre_tx +- (largest receive half-span + largest transmit one)
-    half_span = 0.5 * (high - low)
-    nodes_hz, fit = interpolator(freqs_hz, half_span[:n_rx].max() + half_span[n_rx:].max())
-    if fit is None:                 # direct: every frequency is a node, nothing to factor out
-        centre[:] = 0.0
+    centre, nodes_hz, fit = block_nodes(path_m, freqs_hz, n_rx)
     offsets_m = path_m - centre[:, None]
     at_nodes = np.empty((len(nodes_hz), n_rx, path_m.shape[0] - n_rx), dtype=np.complex64)
     steps_hz = np.diff(nodes_hz)

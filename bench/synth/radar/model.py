@@ -17,14 +17,15 @@ from bench.synth.sampling import SurfaceSamples
 
 def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarray, rx_m: np.ndarray,
                    freqs_hz: np.ndarray, normals: np.ndarray | None = None, lobe_rad: np.ndarray | None = None,
-                   element_exponent: float = 0.0, min_lobe_gain: float = 0.0) -> np.ndarray:
+                   element_exponent: float = 0.0, min_lobe_gain: float = 0.0, device: str = "cpu") -> np.ndarray:
     """Frame of point scatterers: complex64 (n_rx, n_tx, F) indexed [rx, tx, f].
 
     points_m (K, 3) radar space, amplitudes (K,) complex (reflectivity, without path loss), tx_m (n_tx, 3),
     rx_m (n_rx, 3), freqs_hz (F,). Path loss 1 / (|p - tx| |p - rx|) is applied here, and per leg (scatterer to
     one antenna) the optional gains of `leg_gains`: the quasi-specular lobe (normals (K, 3), lobe_rad (K,)) and the
     element pattern cos(theta)^element_exponent. Scatterers whose lobe gain towards every antenna is below
-    `min_lobe_gain` are skipped.
+    `min_lobe_gain` are skipped. `device`: "cpu" sums with NumPy (bench.synth.radar.leg_sum), "cuda" or "warp-cpu"
+    forms the legs and sums on that Warp device (bench.synth.radar.warp_sum).
     """
     points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     amplitudes = np.asarray(amplitudes, dtype=np.complex128).reshape(-1)
@@ -35,6 +36,13 @@ def simulate_frame(points_m: np.ndarray, amplitudes: np.ndarray, tx_m: np.ndarra
         # lobe gain exp(-theta^2 / (2 lobe^2)) >= min_lobe_gain  <=>  cos(theta) >= cos(lobe sqrt(2 ln(1 / min)))
         limit_rad = np.asarray(lobe_rad) * np.sqrt(2.0 * np.log(1.0 / min_lobe_gain))
         cos_limit = np.where(limit_rad < np.pi, np.cos(np.minimum(limit_rad, np.pi)), -np.inf)
+    if device != "cpu":         # the same legs and sums on a Warp device (bench.synth.radar.warp_sum)
+        from bench.synth.radar import warp_sum
+
+        lobes = (normals, lobe_rad) if normals is not None else (None, None)
+        rows = warp_sum.Rows(warp_sum.Side(points_m, *lobes, amplitudes), warp_sum.Side(points_m, *lobes),
+                             element_exponent, cos_limit if normals is not None and min_lobe_gain > 0 else None)
+        return warp_sum.frame(rows, points_m, rx_m, tx_m, freqs_hz, device)
 
     def legs(rows: np.ndarray):
         # every pass below runs over cache-sized chunks of antennas (row_chunks); all gains in float32 (the weights
@@ -141,14 +149,15 @@ def roughen(samples: SurfaceSamples, config: SynthConfig, rng: np.random.Generat
 
 
 def clutter_frame(tx_m: np.ndarray, rx_m: np.ndarray, freqs_hz: np.ndarray, config: SynthConfig,
-                  object_power: float, rng: np.random.Generator) -> np.ndarray:
+                  object_power: float, rng: np.random.Generator, device: str = "cpu") -> np.ndarray:
     """Empty-room response: `clutter_points` static point scatterers behind the object (x, y within +-0.4 m,
     z between 0.8 and 1.0 x the back-wall distance), random complex amplitudes, scaled so that their mean power is
     `clutter_to_signal_db` relative to the mean object power."""
     n = config.clutter_points
     points_m = np.column_stack([rng.uniform(-0.4, 0.4, n), rng.uniform(-0.4, 0.4, n),
                                 rng.uniform(0.8, 1.0, n) * config.wall_distance_m])
-    clutter = simulate_frame(points_m, rng.normal(size=n) + 1j * rng.normal(size=n), tx_m, rx_m, freqs_hz)
+    clutter = simulate_frame(points_m, rng.normal(size=n) + 1j * rng.normal(size=n), tx_m, rx_m, freqs_hz,
+                             device=device)
     scale = np.sqrt(object_power * 10.0 ** (config.clutter_to_signal_db / 10.0) / np.mean(np.abs(clutter) ** 2))
     return (clutter * scale).astype(np.complex64)
 

@@ -156,10 +156,11 @@ def _second_leg(pairs: BouncePairs, rows: np.ndarray, antennas_m: np.ndarray, el
 
 
 def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs_hz: np.ndarray,
-                   element_exponent: float = 0.0) -> np.ndarray:
+                   element_exponent: float = 0.0, device: str = "cpu") -> np.ndarray:
     """The double-bounce echo of `pairs`, both directions, complex64 (n_rx, n_tx, F) in the direct echo's units.
 
     Rows 0..K-1 are the forward paths (tx -> p1 -> p2 -> rx), rows K..2K-1 the reverse ones (bench.synth.radar.leg_sum).
+    `device` as model.simulate_frame's.
     """
     tx_m, rx_m = np.asarray(tx_m, float), np.asarray(rx_m, float)
     n_pairs = len(pairs.hop_m)
@@ -173,4 +174,11 @@ def simulate_pairs(pairs: BouncePairs, tx_m: np.ndarray, rx_m: np.ndarray, freqs
 
     # a row is placed by its receive-leg and transmit-leg points, so that a block's legs span little
     positions = np.block([[pairs.second_m, pairs.first_m], [pairs.first_m, pairs.second_m]])
+    if device != "cpu":         # the same legs and sums on a Warp device (bench.synth.radar.warp_sum)
+        from bench.synth.radar import warp_sum
+
+        second = warp_sum.Side(pairs.second_m, pairs.outgoing, pairs.lobe_rad, pairs.amplitude)
+        first = warp_sum.Side(pairs.first_m, added_m=pairs.hop_m)
+        rows = warp_sum.Rows(warp_sum.joined(second, first), warp_sum.joined(first, second), element_exponent)
+        return warp_sum.frame(rows, positions, rx_m, tx_m, freqs_hz, device)
     return leg_sum(legs, positions, len(rx_m), len(tx_m), freqs_hz)

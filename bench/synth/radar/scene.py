@@ -30,11 +30,12 @@ from bench.synth.sampling import SurfaceSamples, back_wall_samples, visible_samp
 from bench.synth.scenes import Scene
 
 
-def _ideal_object(scene: Scene, config: SynthConfig, antennas, freqs, rng) -> np.ndarray:
+def _ideal_object(scene: Scene, config: SynthConfig, antennas, freqs, rng, device: str) -> np.ndarray:
     samples = visible_samples([p.tris_m for p in scene.parts], config.sample_spacing_m)
     reflectivity = np.array([p.reflectivity for p in scene.parts])
     amplitudes = surface_amplitudes(samples, reflectivity, config)
-    return simulate_frame(roughen(samples, config, rng), amplitudes, antennas.tx_m, antennas.rx_m, freqs)
+    return simulate_frame(roughen(samples, config, rng), amplitudes, antennas.tx_m, antennas.rx_m, freqs,
+                          device=device)
 
 
 LOBE_CUTOFF = 1e-2   # samples whose lobe gain towards every antenna is below this reach no pair above 1e-4: skipped
@@ -42,18 +43,20 @@ LOBE_CUTOFF = 1e-2   # samples whose lobe gain towards every antenna is below th
 
 
 def _simulate(samples: SurfaceSamples, amplitudes: np.ndarray, points_m: np.ndarray, lobe_rad: np.ndarray | None,
-              config: SynthConfig, antennas, freqs) -> np.ndarray:
+              config: SynthConfig, antennas, freqs, device: str) -> np.ndarray:
     lobes = None if lobe_rad is None else lobe_rad[samples.part]
     return simulate_frame(points_m, amplitudes, antennas.tx_m, antennas.rx_m, freqs,
-                          None if lobe_rad is None else samples.normals, lobes, config.element_exponent, LOBE_CUTOFF)
+                          None if lobe_rad is None else samples.normals, lobes, config.element_exponent, LOBE_CUTOFF,
+                          device)
 
 
-def object_frame(scene: Scene, config: SynthConfig, antennas, freqs, rng) -> np.ndarray:
-    """The echo of every part of the scene (mount included), complex64 (n_rx, n_tx, F), model units."""
+def object_frame(scene: Scene, config: SynthConfig, antennas, freqs, rng, device: str = "cpu") -> np.ndarray:
+    """The echo of every part of the scene (mount included), complex64 (n_rx, n_tx, F), model units; the sums on
+    `device` (bench.synth.radar.leg_sum)."""
     realistic = (config.radar_materials or config.scattering != "cosine" or config.element_exponent
                  or config.transmission or config.multipath)
     if not realistic:
-        return _ideal_object(scene, config, antennas, freqs, rng)
+        return _ideal_object(scene, config, antennas, freqs, rng, device)
     materials = [MATERIALS[p.material] for p in scene.parts]
     part_tris = [p.tris_m for p in scene.parts]
     if config.radar_materials:
@@ -65,32 +68,35 @@ def object_frame(scene: Scene, config: SynthConfig, antennas, freqs, rng) -> np.
     lobe_rad = np.deg2rad([m.lobe_deg for m in materials]) if config.scattering == "specular" else None
     front = visible_samples(part_tris, config.sample_spacing_m)
     frame = _simulate(front, material_amplitudes(front, reflection, config),
-                      roughen_by_part(front, roughness_m, rng), lobe_rad, config, antennas, freqs)
+                      roughen_by_part(front, roughness_m, rng), lobe_rad, config, antennas, freqs, device)
     if config.multipath:          # second order: object parts and object and mount (bench.synth.radar.multipath)
         lobes = lobe_rad if lobe_rad is not None else np.full(len(materials), np.pi)
         antennas_m = np.concatenate([antennas.rx_m, antennas.tx_m])
         pairs = multipath.bounce_pairs(part_tris, front, reflection, lobes, antennas_m)
-        frame += multipath.simulate_pairs(pairs, antennas.tx_m, antennas.rx_m, freqs, config.element_exponent)
+        frame += multipath.simulate_pairs(pairs, antennas.tx_m, antennas.rx_m, freqs, config.element_exponent,
+                                          device)
     if config.transmission:
         through = np.array([m.transmission for m in materials])
         back = back_wall_samples(part_tris, [t > 0 for t in through], config.sample_spacing_m)
         if len(back.areas_m2):
             amplitudes = material_amplitudes(back, reflection * through, config)
             frame += _simulate(back, amplitudes, roughen_by_part(back, roughness_m, rng), lobe_rad, config,
-                               antennas, freqs)
+                               antennas, freqs, device)
     return frame
 
 
-def frames(scene: Scene, config: SynthConfig, rng: np.random.Generator) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame; the scene is static, noise is per frame."""
+def frames(scene: Scene, config: SynthConfig, rng: np.random.Generator,
+           device: str = "cpu") -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame; the scene is static, noise is per frame. The
+    radar sums run on `device` ("cpu": NumPy, the default and the demo's; "cuda", "warp-cpu": Warp)."""
     antennas = load_antenna_array(all_elements=True)
     freqs = frequencies_hz(config)
-    obj = object_frame(scene, config, antennas, freqs, rng)
+    obj = object_frame(scene, config, antennas, freqs, rng, device)
     power = float(np.mean(np.abs(obj) ** 2))
     if not config.clutter:
         clutter = np.zeros_like(obj)
     elif config.clutter_model == "points":
-        clutter = clutter_frame(antennas.tx_m, antennas.rx_m, freqs, config, power, rng)
+        clutter = clutter_frame(antennas.tx_m, antennas.rx_m, freqs, config, power, rng, device)
     else:
         clutter = wall_frame(antennas.tx_m, antennas.rx_m, freqs, config)
     gains = None

@@ -13,7 +13,7 @@ from methods.backends.warp.frames import C_M_PER_S, BufferPool, FrameCache, Fram
 from methods.backends.warp.kernels import correlation as kernels
 from methods.ops import range_compression
 
-KERNELS = ("tc", "separable", "direct", "range", "columns")
+KERNELS = ("tc", "tc3", "separable", "direct", "range", "columns")
 
 
 def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
@@ -26,7 +26,7 @@ def path_window_m(tx_m, rx_m, x_m, y_m, z_m) -> tuple[float, float]:
 def range_profiles(inputs: FrameInputs, freqs_hz, box_m):
     """(function that builds the frame's range profiles over the paths the box `box_m` = (x_m, y_m, z_m) can reach,
     the gather's arguments after the points: rx, tx, k_c, carrier cycles per metre, samples per metre, m0,
-    profiles). The DFT tables are uploaded once per frame."""
+    profiles). The DFT tables are uploaded once per frequency plan, the raw frame once per frame."""
     rplan = range_compression.plan(freqs_hz)
     if rplan is None:
         raise ValueError("range compression needs >= 2 distinct frequencies on an equidistant grid "
@@ -34,7 +34,7 @@ def range_profiles(inputs: FrameInputs, freqs_hz, box_m):
     dev = inputs.device
     n_rx, n_tx_pad = len(inputs.rx_m), len(inputs.tx_m) + inputs.n_tx_pad
     m0, n_window = range_compression.sample_window(rplan, *path_window_m(inputs.tx_m, inputs.rx_m, *box_m))
-    sig, twiddle, shift, index = inputs.range_tables(rplan)
+    twiddle, shift, index = inputs.range_tables(rplan)
     profiles = wp.empty((n_rx * n_tx_pad, n_window), dtype=wp.vec2h, device=dev)
     k_c = 2 * np.pi * rplan.f_carrier_hz / C_M_PER_S
     gather_args = [inputs.rx, inputs.tx_padded, wp.float32(k_c), wp.float64(2.0 * rplan.f_carrier_hz / C_M_PER_S),
@@ -42,7 +42,8 @@ def range_profiles(inputs: FrameInputs, freqs_hz, box_m):
 
     def build():
         wp.launch(kernels.range_profiles, dim=(n_rx * n_tx_pad, n_window),
-                  inputs=[sig, index, twiddle, shift, int(m0) % rplan.n_samples, profiles], device=dev)
+                  inputs=[inputs.raw_device, wp.float32(inputs.scale), n_tx_pad, index, twiddle, shift,
+                          int(m0) % rplan.n_samples, profiles], device=dev)
     return build, gather_args
 
 
@@ -64,7 +65,8 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
                 inputs: FrameInputs | None = None, term_tol: float = columns.TERM_TOL, count: wp.array | None = None):
     """Upload inputs once; return a function that runs `kernel` and returns the device output (rows, N) vec2f.
 
-    kernel: "tc" (tensor cores, fp16 operands), "separable" (fp32), "direct", "range" (frequency sum only; the
+    kernel: "tc" (tensor cores, fp16 operands), "tc3" (tensor cores, split fp16 operands: CUDA only; ~fp32
+    operand precision at ~? the time of "tc"), "separable" (fp32), "direct", "range" (frequency sum only; the
     range profiles are rebuilt on every call, as a new frame needs, over the paths the grid's or the points' box
     can reach) or "columns" (grids only: the column-separable sum of `columns` with the rho step of `term_tol`,
     tables rebuilt on every call).
@@ -107,8 +109,10 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
         if not sum_freqs:
             raise ValueError("the range kernel gives the frequency sum only (sum_freqs=True)")
         return _range_launch(inputs, freqs_hz, flag, points, x, y, z, out, box_m)
-    if kernel == "tc":
-        rx4, tx4, gain, mat = inputs.tile_tables(with_mat=wp.get_device(dev).is_cpu)
+    if kernel == "tc3" and wp.get_device(dev).is_cpu:
+        raise ValueError("the split tensor-core kernel tc3 runs on CUDA only")
+    if kernel in ("tc", "tc3"):
+        rx4, tx4, gain, mat = inputs.tile_tables(with_mat=wp.get_device(dev).is_cpu, split=kernel == "tc3")
         if reuse:
             pts = buffers.get("pts", n_out, wp.vec4f)
             common = buffers.get("common", (inputs.n_freqs, n_out), wp.vec2f)
@@ -117,10 +121,11 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
             common = wp.empty((inputs.n_freqs, n_out), dtype=wp.vec2f, device=dev)
         prep_args = [flag, points, x, y, z, inputs.cycles, pts, common]
         if not wp.get_device(dev).is_cpu:    # (tx halves need real blocks: Warp-CPU runs block_dim 1: rx product)
-            tc_kernel, n_tile = kernels.correlate_tiles_tx_halves, int(kernels.TC2_POINTS)
+            tc_kernel = kernels.correlate_tiles_tx_split if kernel == "tc3" else kernels.correlate_tiles_tx_halves
+            n_tile = int(kernels.TC2_POINTS)
             every = count if count is not None else buffers.constant(
                 "count.all", lambda: wp.array([2**31 - 1], dtype=wp.int32, device=dev))
-            tc_args = [pts, rx4, tx4, inputs.k, gain, inputs.tx_half_tables(), common, int(sum_freqs), out, every]
+            tc_args = [pts, rx4, tx4, inputs.k, gain, mat, common, int(sum_freqs), out, every]
         else:
             tc_kernel, n_tile = kernels.correlate_tiles_rx_product, int(kernels.TC_POINTS)
             tc_args = [pts, rx4, tx4, inputs.k, gain, mat, common, int(sum_freqs), out]

@@ -50,16 +50,18 @@ def _scene_frame(rng):
 
 
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
-@pytest.mark.parametrize("threshold_db, z_edges", [(14.0, (True, False)), (None, (True, True))])
-def test_device_search_equals_the_host_search(device, threshold_db, z_edges):
+@pytest.mark.parametrize("threshold_db, z_edges, n_z", [(14.0, (True, False), 40), (None, (True, True), 40),
+                                                        (None, (True, True), 4)])
+def test_device_search_equals_the_host_search(device, threshold_db, z_edges, n_z):
+    """40 depths: several refinement levels per pixel; 4 depths: the coarse step clipped to the last depth."""
     backend = _searching(device)
     rng = np.random.default_rng()
     signal = _scene_frame(rng)
     xx, yy = np.meshgrid(np.linspace(-0.06, 0.06, 9), np.linspace(0.06, -0.06, 7))
     x_m, y_m = xx.ravel(), yy.ravel()
-    z_m = np.arange(0.26, 0.36, 0.0025)
+    z_m = 0.26 + 0.0025 * np.arange(n_z)
     plan = bp_search.plan_search(FREQS_HZ, ANT, x_m, y_m, float(z_m[0]), 0.0025, 3.0, 0.02, 1.0)
-    assert plan.step.max() > 1
+    assert plan.step.max() > 1 and (n_z > 4 or plan.step.min() >= n_z - 1)
     host = bp_search.search_depth(backend.summed_at_points(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m), x_m, y_m, z_m,
                                   plan, threshold_db, z_edges)
     got = bp_search.SearchResult(*backend.search_depth(signal, FREQS_HZ, ANT.tx_m, ANT.rx_m, x_m, y_m, z_m, plan,

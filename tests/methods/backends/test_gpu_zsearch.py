@@ -17,9 +17,30 @@ from devices import CUDA
 
 ANT = load_antenna_array()
 FREQS_HZ = np.array([81.45e9, 82e9])
-# max |magnitude difference| / image maximum of each device's volume kernel against float64: fp32 separable sum
-# (Warp-CPU) ~1e-5; fp16 tensor-core operands (CUDA) round to 2^-11 = 4.9e-4 per entry, measured 8.5e-5
-MAG_TOL_CPU, MAG_TOL_CUDA = 1e-4, 4.9e-4
+# max |magnitude difference| / image maximum against float64 of the kernel the test runs: fp32 separable sum
+# (Warp-CPU) ~1e-5; on CUDA the split-operand tensor-core kernel "tc3" (measured <= 7.6e-6). The default fp16 kernel
+# "tc" (1.1-2.7e-4) moves a flat two-frequency peak's parabola vertex by up to ~0.1 mm (docs/measurements/
+# formation.md, section 5), so the float64 depth criterion is checked with the accurate kernel; the search itself
+# does not depend on the kernel.
+MAG_TOL = 1e-4
+
+
+@pytest.fixture
+def accurate_backend():
+    """device -> its backend with the accurate tensor-core kernel on CUDA (restored after the test)."""
+    from methods.backends import backend_for
+
+    changed = []
+
+    def get(device):
+        backend = backend_for(device)
+        if not backend.device.is_cpu:
+            changed.append((backend, backend.default_kernel))
+            backend.default_kernel = "tc3"
+        return backend
+    yield get
+    for backend, kernel in changed:
+        backend.default_kernel = kernel
 
 
 def _surface_frame(rng, n=150):
@@ -35,10 +56,8 @@ def _surface_frame(rng, n=150):
 
 
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
-def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
-    from methods.backends import backend_for
-
-    backend = backend_for(device)
+def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device, accurate_backend):
+    backend = accurate_backend(device)
     seed = int(np.random.SeedSequence().entropy % 2**32)             # fresh each run, printed when it fails
     rng = np.random.default_rng(seed)
     signal = _surface_frame(rng)
@@ -59,9 +78,8 @@ def test_window_search_matches_the_float64_volume_and_the_dense_kernel(device):
     kept = ref_proj >= ref_proj.max() * 10 ** (-14 / 20)
     assert kept.sum() >= 10
     assert np.mean(np.abs(got_depth[kept] - ref_depth[kept]) <= 1e-4) >= 0.999, f"seed {seed}"
-    mag_tol = MAG_TOL_CPU if device == "warp-cpu" else MAG_TOL_CUDA
-    assert np.max(np.abs(got_proj - ref_proj)[kept]) <= mag_tol * ref_proj.max()
-    assert np.all(got_proj <= ref_proj + mag_tol * ref_proj.max())   # elsewhere a window's maximum: a lower bound
+    assert np.max(np.abs(got_proj - ref_proj)[kept]) <= MAG_TOL * ref_proj.max()
+    assert np.all(got_proj <= ref_proj + MAG_TOL * ref_proj.max())   # elsewhere a window's maximum: a lower bound
     # the windows hold the dense volume's own values: at the -14 dB pixels the same depths (but where the maximum lies
     # on a window edge) and wherever the depth is the same, the same maximum (float32 sums of one kernel)
     same = np.abs(got_depth - dense_depth) <= 1e-9

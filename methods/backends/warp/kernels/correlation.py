@@ -7,6 +7,8 @@ One thread per point or voxel; points come from an (N, 3) array or from an x/y/z
   real-split product M_h^T A^T on the tensor cores (`wp.tile_matmul`, fp16 operands, fp32 accumulation),
   A^T = [cos; sin](k e_rx), M = [[Sr, Si], [-Si, Sr]], operand rows padded off multiples of 128 bytes; then the
   Tx dot as per-thread partial sums in fp32 (`prepare_points` forms the per-point data).
+* `correlate_tiles_tx_split` (kernel "tc3", CUDA): the same with each fp16 operand split into hi + scaled lo parts and
+  three products per half, for ~fp32 operand precision (1.8e-4 -> ~1e-6 relative error against float64).
 * `correlate_tiles_rx_product` (kernel "tc" on Warp-CPU, which runs tiles with block_dim 1): blocks of 64 points,
   the product [cos|sin](k e_rx) (64 x 192) @ M (192 x 192), then a row-wise dot with the Tx steering.
 * `range_profiles` + `range_gather`: range-compressed back-projection (methods/ops/range_compression.py): profiles in
@@ -286,6 +288,84 @@ def correlate_tiles_tx_halves(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=
         wp.tile_store(out[0], total, offset=i0)
 
 
+TC3_SCALE = wp.constant(2048.0)      # 2^11: an fp16 rounding's residual scaled back into fp16's normal range
+TC3_UNSCALE = wp.constant(1.0 / 2048.0)
+
+
+@wp.func
+def cos_lo(e: wp.float32, k: wp.float32) -> wp.float16:
+    """(cos - fp16(cos)) * TC3_SCALE in fp16: cos_half + cos_lo / TC3_SCALE is cos to ~2^-22."""
+    c = wp.cos(reduced_phase(e, k))
+    return wp.float16((c - wp.float32(wp.float16(c))) * TC3_SCALE)
+
+
+@wp.func
+def sin_lo(e: wp.float32, k: wp.float32) -> wp.float16:
+    s = wp.sin(reduced_phase(e, k))
+    return wp.float16((s - wp.float32(wp.float16(s))) * TC3_SCALE)
+
+
+@wp.kernel(module="unique", module_options={"fast_math": True, "enable_backward": False})
+def correlate_tiles_tx_split(pts: wp.array(dtype=wp.vec4f), rx: wp.array(dtype=wp.vec4f), tx: wp.array(dtype=wp.vec4f),
+                             k_rad_per_m: wp.array(dtype=wp.float32), gain: wp.array(dtype=wp.float32),
+                             mat_hl: wp.array4d(dtype=wp.float16), common: wp.array2d(dtype=wp.vec2f), sum_freqs: int,
+                             out: wp.array2d(dtype=wp.vec2f), count: wp.array(dtype=wp.int32)):
+    """`correlate_tiles_tx_halves` with split fp16 operands (kernel "tc3"): each operand X = X_hi + X_lo / 2^11 (both
+    fp16), and per Tx half Y_h^T = M_hi A_hi + (M_hi A_lo + M_lo A_hi) / 2^11 on the tensor cores (fp32
+    accumulation; the lo * lo term, ~2^-22, is left out), so the product carries ~fp32 operand precision instead of
+    fp16's 2^-11. mat_hl (F, 4, 96, TC2_KP): slot 2 h + 0 is M_h^T's hi part (`tx_half_tables`' values), slot
+    2 h + 1 its scaled residual. Shared memory: A_hi, A_lo, one M slot, Y_h^T (~204 KB, one block per SM)."""
+    blk, lane = wp.tid()
+    i0 = blk * TC2_POINTS
+    if i0 >= count[0]:
+        return
+    pt = lane % TC2_POINTS
+    grp = lane // TC2_POINTS
+    p = wp.tile_load(pts, shape=TC2_POINTS, offset=i0, storage="shared")
+    qr = wp.tile_load(rx, shape=TC_ANT, storage="shared")
+    qt = wp.tile_load(tx, shape=TC_ANT, storage="shared")
+    pb = wp.tile_broadcast(wp.tile_reshape(p, shape=(1, TC2_POINTS)), shape=(TC_ANT, TC2_POINTS))
+    qb = wp.tile_broadcast(wp.tile_reshape(qr, shape=(TC_ANT, 1)), shape=(TC_ANT, TC2_POINTS))
+    a = wp.tile_empty(shape=(TC2_KP, TC2_NP), dtype=wp.float16, storage="shared")
+    a_lo = wp.tile_empty(shape=(TC2_KP, TC2_NP), dtype=wp.float16, storage="shared")
+    wp.tile_assign(a, wp.tile_zeros(shape=(TC2_PAD, TC2_NP), dtype=wp.float16), offset=(TC_K, 0))  # 0 x garbage: NaN
+    wp.tile_assign(a_lo, wp.tile_zeros(shape=(TC2_PAD, TC2_NP), dtype=wp.float16), offset=(TC_K, 0))
+    e_rx = wp.tile_map(path_excess4_m, pb, qb)
+    y = wp.tile_empty(shape=(TC_ANT, TC2_NP), dtype=wp.float32, storage="shared")
+    pp = p[pt]
+    total = wp.tile_zeros(shape=TC2_POINTS, dtype=wp.vec2f)
+    n_half = mat_hl.shape[1] // 2
+    n_part = mat_hl.shape[1] // n_half
+    for f in range(k_rad_per_m.shape[0]):
+        k = k_rad_per_m[f]
+        wp.tile_assign(a, wp.tile_map(cos_half, e_rx, k), offset=(0, 0))
+        wp.tile_assign(a, wp.tile_map(sin_half, e_rx, k), offset=(TC_ANT, 0))
+        wp.tile_assign(a_lo, wp.tile_map(cos_lo, e_rx, k), offset=(0, 0))
+        wp.tile_assign(a_lo, wp.tile_map(sin_lo, e_rx, k), offset=(TC_ANT, 0))
+        acc = wp.vec2f(0.0, 0.0)
+        for h in range(n_half):                          # run-time bounds: one M slot allocation, not unrolled
+            for part in range(n_part):
+                m = wp.tile_load(mat_hl[f, h * n_part + part], shape=(TC_ANT, TC2_KP), storage="shared",
+                                 aligned=True)
+                if part == 0:
+                    wp.tile_matmul(m, a, y, alpha=1.0, beta=0.0)
+                    wp.tile_matmul(m, a_lo, y, alpha=TC3_UNSCALE, beta=1.0)
+                else:
+                    wp.tile_matmul(m, a, y, alpha=TC3_UNSCALE, beta=1.0)
+            for jj in range(grp, TC2_HALF, TC2_GROUPS):
+                d = tx_steering_term(y[jj, pt], y[jj + TC2_HALF, pt], path_excess4_m(pp, qt[h * TC2_HALF + jj]), k)
+                acc = acc + d
+        part_sum = wp.tile_reshape(wp.tile(acc, preserve_type=True), shape=(TC2_GROUPS, TC2_POINTS))
+        val = wp.tile_map(cmul_gain, wp.tile_sum(part_sum, axis=0),
+                          wp.tile_load(common[f], shape=TC2_POINTS, offset=i0), gain[f])
+        if sum_freqs == 0:
+            wp.tile_store(out[f], val, offset=i0)
+        else:
+            total = total + val
+    if sum_freqs != 0:
+        wp.tile_store(out[0], total, offset=i0)
+
+
 RANGE_CHUNK = wp.constant(16)      # Tx steering values the range gather keeps in registers at a time
 vec_range = wp.types.vector(length=16, dtype=wp.float32)
 
@@ -297,16 +377,22 @@ def lerp_profile(profiles: wp.array2d(dtype=wp.vec2h), row: int, iu: int, w: wp.
 
 
 @wp.kernel(enable_backward=False)
-def range_profiles(signal: wp.array2d(dtype=wp.vec2f), grid_index: wp.array(dtype=wp.int32),
-                   twiddle: wp.array(dtype=wp.vec2f), shift: wp.array(dtype=wp.vec2f), m0: int,
-                   profiles: wp.array2d(dtype=wp.vec2h)):
-    """profiles[pair, j] = shift[m] sum_n signal[pair, n] twiddle[(i_n m) mod L], m = (m0 + j) mod L, in fp16."""
+def range_profiles(raw: wp.array3d(dtype=wp.vec2f), scale: wp.float32, n_tx_padded: int,
+                   grid_index: wp.array(dtype=wp.int32), twiddle: wp.array(dtype=wp.vec2f),
+                   shift: wp.array(dtype=wp.vec2f), m0: int, profiles: wp.array2d(dtype=wp.vec2h)):
+    """profiles[pair, j] = shift[m] sum_n scale raw[r, t, n] twiddle[(i_n m) mod L], m = (m0 + j) mod L, in fp16,
+    pair = r * n_tx_padded + t (zero for the padded t >= T): straight from the uploaded raw frame (R, T, F)."""
     pair, j = wp.tid()
+    r = pair // n_tx_padded
+    t = pair % n_tx_padded
+    if t >= raw.shape[1]:
+        profiles[pair, j] = wp.vec2h(wp.float16(0.0), wp.float16(0.0))
+        return
     n_samples = twiddle.shape[0]
     m = (m0 + j) % n_samples
     acc = wp.vec2f(0.0, 0.0)
-    for n in range(signal.shape[1]):
-        acc += cmul(signal[pair, n], twiddle[(grid_index[n] * m) % n_samples])
+    for n in range(raw.shape[2]):
+        acc += cmul(raw[r, t, n] * scale, twiddle[(grid_index[n] * m) % n_samples])
     profiles[pair, j] = wp.vec2h(cmul(shift[m], acc))
 
 

@@ -9,13 +9,14 @@
   the host's float64 quotient rounded to fp16 (through float32 where Warp converts: a tie may round apart, 1 fp16
   ulp; tests/methods/backends/test_gpu_tables.py). The thread of entry (f, 0, 0, 0) writes the gain the kernel used (1
   where a
-  frequency's samples are all zero).
+  frequency's samples are all zero);
+* `tx_split_table`: the same entries and their scaled fp16 residuals, the operand of `correlate_tiles_tx_split`.
 """
 from __future__ import annotations
 
 import warp as wp
 
-from methods.backends.warp.kernels.correlation import TC2_HALF, TC_ANT, TC_K
+from methods.backends.warp.kernels.correlation import TC2_HALF, TC3_SCALE, TC_ANT, TC_K
 
 GAIN_BLOCKS = 16      # blocks per frequency of `signal_gain`
 GAIN_BLOCK_DIM = 256  # their threads (94 x 94 samples: ~4 loads each)
@@ -44,19 +45,10 @@ def launch_signal_gain(signal: wp.array, scale, gain_raw: wp.array, device) -> N
                     block_dim=GAIN_BLOCK_DIM, device=device)
 
 
-@wp.kernel(enable_backward=False)
-def tx_half_table(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_raw: wp.array(dtype=wp.float32),
-                  gain: wp.array(dtype=wp.float32), mat_h: wp.array4d(dtype=wp.float16)):
-    """One fp16 entry (f, h, j, i) of M_h^T (module doc)."""
-    f, h, j, i = wp.tid()
-    g = wp.float64(gain_raw[f])
-    if g <= wp.float64(0.0):
-        g = wp.float64(1.0)
-    if h == 0 and j == 0 and i == 0:
-        gain[f] = wp.float32(g)
-    if i >= TC_K:
-        mat_h[f, h, j, i] = wp.float16(0.0)
-        return
+@wp.func
+def table_quotient(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, f: int, h: int, j: int, i: int,
+                   g: wp.float64) -> wp.float64:
+    """Entry (h, j, i < TC_K) of M_h^T before its rounding: M's row i, column of row j of Tx half h, over gain g."""
     col = h * TC2_HALF + j
     if j >= TC2_HALF:
         col = TC_ANT + h * TC2_HALF + j - TC2_HALF
@@ -75,4 +67,46 @@ def tx_half_table(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_ra
             v = -im
             if col >= TC_ANT:
                 v = re
-    mat_h[f, h, j, i] = wp.float16(wp.float32(v / g))
+    return v / g
+
+
+@wp.func
+def gain_of(gain_raw: wp.array(dtype=wp.float32), f: int) -> wp.float64:
+    g = wp.float64(gain_raw[f])
+    if g <= wp.float64(0.0):
+        g = wp.float64(1.0)
+    return g
+
+
+@wp.kernel(enable_backward=False)
+def tx_half_table(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_raw: wp.array(dtype=wp.float32),
+                  gain: wp.array(dtype=wp.float32), mat_h: wp.array4d(dtype=wp.float16)):
+    """One fp16 entry (f, h, j, i) of M_h^T (module doc)."""
+    f, h, j, i = wp.tid()
+    g = gain_of(gain_raw, f)
+    if h == 0 and j == 0 and i == 0:
+        gain[f] = wp.float32(g)
+    if i >= TC_K:
+        mat_h[f, h, j, i] = wp.float16(0.0)
+        return
+    mat_h[f, h, j, i] = wp.float16(wp.float32(table_quotient(signal, scale, f, h, j, i, g)))
+
+
+@wp.kernel(enable_backward=False)
+def tx_split_table(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_raw: wp.array(dtype=wp.float32),
+                   gain: wp.array(dtype=wp.float32), mat_hl: wp.array4d(dtype=wp.float16)):
+    """One fp16 entry (f, 2 h + part, j, i) of `correlate_tiles_tx_split`'s operand: part 0 the entry of M_h^T
+    (`tx_half_table`'s value), part 1 its residual (quotient - hi) * TC3_SCALE."""
+    f, slot, j, i = wp.tid()
+    g = gain_of(gain_raw, f)
+    if slot == 0 and j == 0 and i == 0:
+        gain[f] = wp.float32(g)
+    if i >= TC_K:
+        mat_hl[f, slot, j, i] = wp.float16(0.0)
+        return
+    q = table_quotient(signal, scale, f, slot // 2, j, i, g)
+    hi = wp.float16(wp.float32(q))
+    if slot % 2 == 0:
+        mat_hl[f, slot, j, i] = hi
+    else:
+        mat_hl[f, slot, j, i] = wp.float16(wp.float32((q - wp.float64(wp.float32(hi))) * wp.float64(TC3_SCALE)))
