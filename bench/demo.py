@@ -32,6 +32,12 @@ from bench.progress import Heartbeat, run_relayed
 from bench.report import agreement, tables
 
 EXPERIMENTS = ("table2", "table3")
+# Runtimes: the median of the calls per capture that fit in 1.2 s, at most 3 (app._reconstruct's rule): 3 for a call
+# up to 0.4 s (2FSK, 3FSK, MM-2FSK, the camera, where one busy moment of the machine is a large share of a call), 2 up
+# to 0.6 s, one for a longer call (BP), as BP_max always was. Over the demo's cells the mean of 3-call medians was
+# within 2 % of 5- and 7-call medians, one call up to 12 % off (docs/measurements/sweep.md, 2026-11-26 04:27); 5
+# calls within 2 s cost ~25 s more on two cores.
+TIMING = ("timing.repeat=3", "timing.budget_s=1.2")
 REPORT_FILES = ("{table}.md", "{table}.csv", "{table}_pairs.csv", "{table}.tex", "runtime_vs_error.png")
 # One job at a time: runtimes measured alone (docs/measurements/performance.md "The demo's cost"
 # has the measured cost of this choice).
@@ -74,7 +80,7 @@ def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
     steps += [f"{name} ~{seconds:.0f} s" for name, seconds in sweeps_s.items()]
     text = (f"demo: about {total_s / 60:.0f} min on two quiet cores ({', '.join(steps)}); the long step is "
             f"table3's BP_max (~{n * BP_MAX_S_PER_CAPTURE:.0f} s, one back-projection over 128 frequencies per "
-            f"capture), then the report's pictures (~30 s when drawn anew)")
+            f"capture), then the report's pictures (~20 s when drawn anew)")
     if stored:
         text += f"; cells already in {store} are reused, so this run may take much less"
     return text
@@ -121,18 +127,19 @@ def _reason(stderr_tail: list[str]) -> str:
 
 
 def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "realistic",
-          distances_cm: list[int] | None = None) -> pd.DataFrame:
+          distances_cm: list[int] | None = None, depth_errors: bool = False) -> pd.DataFrame:
     """One multirun into `out/<experiment>`; returns its merged rows. Job lines go to stdout as they finish;
     stderr is passed through and its tail kept, so a failure ends in the job's own reason (SweepFailed).
-    `distances_cm`: only the demo's captures at these distances (default: the dataset config's)."""
+    `distances_cm`: only the demo's captures at these distances (default: the dataset config's); `depth_errors`:
+    the sweep root also gets depth_errors/<capture>.png (what --update-results publishes)."""
     objects, distances = demo_captures(distances_cm)
     captures = ",".join(f"{name}/{distance}" for name in objects for distance in distances)
     command = [sys.executable, "-m", "bench", "-m", f"experiment={experiment}", f"hydra/launcher={LAUNCHER}",
                "dataset=synthetic", f"dataset.root={root}", f"synth={synth}", f"store.dir={store}",
                f"dataset.captures=[{captures}]", f"dataset.generate.distances=[{','.join(map(str, distances))}]",
                f"hydra.sweep.dir={out / experiment}",
-               "report.depth_errors=true",                 # results/<table>/depth_errors is published
-               "timing.repeat=5",                          # runtimes: the median of up to 5 calls (2 s a capture)
+               f"report.depth_errors={str(depth_errors).lower()}",
+               *TIMING,
                *QUIET]
     print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
     shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells
@@ -201,7 +208,8 @@ def main() -> int:
     for experiment in EXPERIMENTS:
         sweep_started = time.perf_counter()
         try:
-            rows = sweep(experiment, root, out, store, synth=args.synth, distances_cm=args.distances)
+            rows = sweep(experiment, root, out, store, synth=args.synth, distances_cm=args.distances,
+                         depth_errors=args.update_results)
         except SweepFailed as err:
             print(f"error: {err}", file=sys.stderr)
             return 1

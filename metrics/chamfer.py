@@ -6,9 +6,12 @@ reconstruction. Build the ground-truth tree once per capture (`PointSet`) and re
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 
 @dataclass
@@ -21,6 +24,10 @@ class PointSet:
     @property
     def tree(self) -> cKDTree:
         if self._tree is None:
+            # imported here: scipy.spatial costs ~0.3 s, which a process that only builds ground truths (a sweep
+            # scoring in workers, bench.harness.workers) need not pay
+            from scipy.spatial import cKDTree
+
             # sliding-midpoint splits, not median splits: radar points often lie centimetres off the ground truth's
             # lattice surface, where median-split cells make each query visit many leaves (15-25x slower on the
             # synthetic captures; the nearest distances are the same, the tree's shape only changes the search)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import inspect
+import io
 import logging
 import os
 import socket
@@ -19,6 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import h5py
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
@@ -26,21 +28,21 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
-from bench.harness import CONFIG_DIR, captures, stages, validate
+from bench.harness import CONFIG_DIR, captures, stages, validate, workers
+from bench.harness import results as outputs
 from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
 from bench.harness.results import BackgroundWriter, ResultsCsv, write_depth
 from bench.harness.sizing import busy_cpu_s, contended, machine_load, sweep_jobs, timing_mode
-from bench.harness.store import Store, capture_files, code_version, write_arrays
+from bench.harness.store import Store, capture_files, code_version, copy_cell, write_arrays
 from bench.maroon import reader
 from bench.maroon.frames import parse_frame_spec, select_frames
 from bench.progress import each
 from methods.domain.capture import Capture, RadarGrid
 from methods.domain.errors import DatasetError
 from methods.ops.frequencies import config_targets_ghz
-from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
-from metrics.resample import resample_depth_m, resample_nearest
+from metrics.evaluate import SCORE_COLUMNS, GroundTruth
 
 log = logging.getLogger("bench")
 
@@ -264,28 +266,20 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
 
 
 def _compute(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, device: str, gt: GroundTruth | None
-             ) -> tuple[dict, dict]:
-    """Reconstruct on `grid`, then evaluate on the capture's metric grid (the ground truth's; the depth map is
-    resampled there when the method computed on another grid): (row without identification columns, arrays on
-    the metric grid)."""
+             ) -> tuple[dict, workers.Scoring]:
+    """Reconstruct on `grid`: (the row's columns without identification, its score columns left empty, and what
+    scoring it on the capture's metric grid needs: bench.harness.workers.score)."""
     rec, timing_columns = _reconstruct(cfg, method, capture, grid, device)
-    metric_grid = capture.radar.grid
-    with stages.stage("metrics"):
-        depth_m = resample_depth_m(rec.depth_m, rec.grid, metric_grid)
-        if gt is not None:
-            scores, gt_depth_m = evaluate(depth_m, gt, faithful=bool(cfg.metrics.faithful)), gt.depth_m
-        else:
-            scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
-            log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
-        magnitude = resample_nearest(rec.magnitude, rec.grid, metric_grid)
-    if rec.invalid_reason:       # the method's own account of an all-invalid result, not just 'no valid'
-        scores["failure"] = rec.invalid_reason
+    if gt is None:
+        log.warning("%s: no photogrammetry mesh, metrics left empty", capture.name)
     row = {"f_GHz": " ".join(f"{f / 1e9:.4f}" for f in rec.freqs_hz), "valid_px": int(rec.valid.sum()),
            **timing_columns, "device": rec.device,
-           "compute_grid_size": "x".join(map(str, rec.grid.size)), "roi_px": rec.extra.get("roi_px"), **scores}
+           "compute_grid_size": "x".join(map(str, rec.grid.size)), "roi_px": rec.extra.get("roi_px"),
+           **dict.fromkeys(SCORE_COLUMNS)}
     row.update({f"t_{stage}_ms": ms for stage, ms in rec.timings_ms.items() if stage != "total"})
-    arrays = {"depth_m": depth_m, "magnitude": magnitude, "gt_depth_m": gt_depth_m}
-    return row, arrays
+    task = workers.Scoring(rec.depth_m, rec.magnitude, rec.grid, capture.radar.grid, gt,
+                           bool(cfg.metrics.faithful), rec.invalid_reason)
+    return row, task
 
 
 @functools.lru_cache(maxsize=4)
@@ -315,23 +309,32 @@ def _reusable(stored_timing: str | None, timing: str) -> bool:
     return stored_timing == "contended" and contended(machine_load())
 
 
-def _write_outputs(out_dir: Path, row: dict, arrays: dict, grid: RadarGrid, store: Store | None, key: str | None,
-                   results_csv: ResultsCsv) -> None:
-    """One capture's files: depth PNG + JSON + preview, its arrays in arrays.h5 (copied from the store's cell when
-    there is one), its results.csv line."""
+def _stem(row: dict) -> str:
+    return f"{row['object']}_{row['distance']}_{row['frame']:06d}"
+
+
+def _write_outputs(out_dir: Path, row: dict, arrays: dict | bytes | None, grid: RadarGrid, store: Store | None,
+                   key: str | None, results_csv: ResultsCsv, depth_written: bool = False) -> None:
+    """One capture's files: depth PNG + JSON + preview (unless a worker wrote them), its arrays in arrays.h5 (copied
+    from the store's cell when there is one, or from the image of one a worker compressed: `arrays` as bytes), its
+    results.csv line."""
     with stages.stage("outputs"):
-        stem = f"{row['object']}_{row['distance']}_{row['frame']:06d}"
-        write_depth(out_dir, stem, arrays["depth_m"], grid)
+        stem = _stem(row)
+        if not depth_written:
+            write_depth(out_dir, stem, arrays["depth_m"], grid)
         array_attrs = {**_grid_attrs(grid), "key": key or ""}
         if store is not None:      # compressed once, into the store
             store.copy_arrays(key, out_dir / "arrays.h5", stem, array_attrs)
+        elif isinstance(arrays, bytes):
+            with h5py.File(io.BytesIO(arrays), "r") as image:
+                copy_cell(image, out_dir / "arrays.h5", stem, array_attrs)
         else:
             write_arrays(out_dir / "arrays.h5", stem, arrays, array_attrs)
         results_csv.add(row)       # appended after every capture: an interruption loses no row
 
 
-def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str = "alone", params: str = ""
-        ) -> list[dict]:
+def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str = "alone", params: str = "",
+        defer_outputs: bool = False) -> list[dict]:
     """Evaluate every capture of the configured dataset; returns the result rows (also written to disk).
 
     The method, its parameters and the prior are checked before any data is generated or read. `generate`: first
@@ -340,9 +343,15 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     `timing_mode`) goes into every computed row ('contended' instead of 'alone' when the machine was busy,
     bench.harness.sizing.contended); with 'alone' a stored row timed beside other jobs is recomputed, so a
     contended runtime never passes for a clean one. `params`: the row's parameters (bench.harness.identity).
-    Output files are written on a background thread while the next capture computes.
+    Output files are written on a background thread while the next capture computes; with `defer_outputs` (a
+    basic launcher's sweep: its next job runs in this process) the run returns before the last of them are written
+    (bench.harness.results.defer) and its rows are complete once `finish_deferred` returned; the next run waits for
+    them first.
     """
     from methods.backends import resolve_device
+
+    with stages.stage("outputs"):
+        outputs.finish_deferred()
 
     device = resolve_device(cfg.device)
     method = _method(cfg)
@@ -361,7 +370,11 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     antenna_files = _antenna_files(cfg)
     identity = _identity(cfg, method, params)
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows, results_csv, writer = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter()
+    pool = workers.pool(workers.pool_size(OmegaConf.select(cfg, "evaluation.workers", default=0), device,
+                                          shared=timing == "parallel"))
+    if pool is not None:
+        timing = "parallel"              # the workers share the host with the timed calls (bench.harness.workers)
+    rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _job_log()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
     label = f"{method.label} {cfg.freq.name}{f' {params}' if params else ''}"
@@ -383,23 +396,27 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 if hit is not None and not _reusable(hit[0].get("timing"), timing):
                     hit = None           # its runtime was measured beside other jobs (or not recorded): re-measure
             if hit is None:
-                row, arrays, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
-                                                  store, grid_override, device, timing, identity)
+                row, task, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
+                                                store, grid_override, device, timing, identity)
                 row.update(hostname=socket.gethostname(), code_version=cell["code"], key=key)
-                if store is not None:
-                    writer.submit(store.put, key, row, arrays, _grid_attrs(grid))
+                result = _scored(task, row, grid, out_dir, store, pool, writer)
+                computed_s.append(time.perf_counter() - started)
             else:
                 row, arrays, attrs = hit
                 row.update(identity)
                 grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]),
                                  tuple(map(int, attrs["grid_size"])))
-            rows.append({**row, "cached": hit is not None})
-            writer.submit(_write_outputs, out_dir, rows[-1], arrays, grid, store, key, results_csv)
-            if hit is None:
-                computed_s.append(time.perf_counter() - started)
-                log.info("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"],
-                         row["distance"], row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
-    finally:
+                result = workers.done((row, arrays, {}))
+            rows.append({"object": row["object"], "distance": row["distance"], "cached": hit is not None})
+            writer.submit(_finish, result, rows[-1], out_dir, grid, store, key, results_csv,
+                          hit is None and pool is not None, job_log)
+    except BaseException:
+        with stages.stage("outputs"):
+            writer.close()
+        raise
+    if defer_outputs:
+        outputs.defer(writer)
+    else:
         with stages.stage("outputs"):
             writer.close()
     if durations is not None and computed_s:
@@ -410,10 +427,58 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     return rows
 
 
+def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, store: Store | None, pool,
+            writer: BackgroundWriter):
+    """A computed capture scored (bench.harness.workers): in this thread without a pool (its cell then written by
+    the writer), else in a worker, which also writes its depth files and cell. A future of (row, arrays or None,
+    the worker's seconds by stage)."""
+    if pool is None:
+        with stages.stage("metrics"):
+            scores, arrays = workers.score(task)
+        row.update(scores)
+        if store is not None:
+            writer.submit(store.put, row["key"], row, arrays, _grid_attrs(grid))
+        return workers.done((row, arrays, {}))
+    task.gt = workers.shipped(task.gt)
+    return pool.submit(workers.score_and_write, task, row, out_dir, _stem(row), _grid_attrs(grid),
+                       None if store is None else str(store.root))
+
+
+def _finish(result, entry: dict, out_dir: Path, grid: RadarGrid, store: Store | None, key: str | None,
+            results_csv: ResultsCsv, by_worker: bool, job_log) -> None:
+    """On the writer thread, in capture order: the capture's scored row (waiting for its worker, which wrote its
+    depth files: `by_worker`) into its `entry` of the run's rows, and its files (`_write_outputs`)."""
+    row, arrays, worker_s = result.result()
+    for stage, seconds in worker_s.items():
+        stages.add_background(stage, seconds)
+    cached = entry["cached"]
+    entry.clear()
+    entry.update(row, cached=cached)            # in the row's column order, `cached` last
+    _write_outputs(out_dir, entry, arrays, grid, store, key, results_csv, depth_written=by_worker)
+    if not cached:
+        job_log("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],
+                row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
+
+
+def _job_log():
+    """`log.info` into the handlers logging has now (the job's, which Hydra replaces when the next job starts): for
+    lines the writer thread logs after its job returned (`defer_outputs`)."""
+    handlers = [*log.handlers, *(logging.getLogger().handlers if log.propagate else ())]
+
+    def info(message: str, *args) -> None:
+        if log.isEnabledFor(logging.INFO):
+            record = log.makeRecord(log.name, logging.INFO, __file__, 0, message, args, None)
+            for handler in handlers:
+                if record.levelno >= handler.level:
+                    handler.handle(record)
+    return info
+
+
 def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_filtered: bool, antenna_files,
                   store: Store | None, grid_override, device: str, timing: str, identity: dict
-                  ) -> tuple[dict, dict, RadarGrid]:
-    """Read, reconstruct and score one capture frame: (row, arrays, metric grid)."""
+                  ) -> tuple[dict, workers.Scoring, RadarGrid]:
+    """Read and reconstruct one capture frame: (row with its score columns empty, what scoring it needs, metric
+    grid)."""
     def read(parts):
         with stages.stage("reading"):
             return captures.read(capture_dir, frame, parts, empty_filtered, antenna_files, store)
@@ -427,10 +492,17 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
     grid = capture.radar.grid
     row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index, **identity,
            "radar_time_s": capture.radar.timestamp_s, **_pairing_columns(capture, capture_dir)}
-    scores, arrays = _compute(cfg, method, capture, grid_for(capture, grid_override), device, gt)
-    busy = timing == "alone" and contended(scores["load_1m"], scores.get("others_cores", float("nan")))
-    row.update(scores, timing="contended" if busy else timing)
-    return row, arrays, grid
+    columns, task = _compute(cfg, method, capture, grid_for(capture, grid_override), device, gt)
+    busy = timing == "alone" and contended(columns["load_1m"], columns.get("others_cores", float("nan")))
+    row.update(columns, timing="contended" if busy else timing)
+    return row, task, grid
+
+
+def _next_job_here(hydra_cfg: DictConfig) -> bool:
+    """Whether the multirun's next job runs in this process after this one (the basic launcher): this job's last
+    output files may then be written while it starts (the merge callback waits for them)."""
+    return (hydra_cfg.mode == RunMode.MULTIRUN
+            and str(hydra_cfg.launcher.get("_target_", "")).endswith("BasicLauncher"))
 
 
 def _isolate_warp_cache() -> None:
@@ -471,7 +543,7 @@ def main(cfg: DictConfig) -> None:
         started = time.perf_counter()
         params = params_string(list(hydra_cfg.overrides.task))
         rows = run(cfg, out_dir, generate=synthetic_asked(list(hydra_cfg.overrides.task)),
-                   timing=timing_mode(hydra_cfg), params=params)
+                   timing=timing_mode(hydra_cfg), params=params, defer_outputs=_next_job_here(hydra_cfg))
         print(progress_line(cfg, hydra_cfg, rows, time.perf_counter() - started, params), flush=True)
     except BrokenPipeError:    # stdout closed (`... | head`): quiet exit 141, not Hydra's traceback
         cli.exit_on_closed_stdout()

@@ -5,10 +5,10 @@
 change a result: a method's parameters (`method.params.offset_mm=2` -> `offset_mm=2`), `threshold_db`,
 `prior.fill`, `prior.max_jump_mm`, `roi=...`, `profile=...`, `freq.f_ghz=...`. Left out are the settings that
 are columns of their own (method, freq, prior, grid, device, metrics), those that choose the data or where
-results go (dataset, synth, store, report, hydra) and how runtimes are taken (timing); cell and experiment pick
-the columns' values. The result store's key holds the values of every setting already (bench.harness.app `_cell`);
-`params` is what a reader sees: results.csv's column, job lines (`custom_d10_realsense offset_mm=2`) and the
-tables' row labels.
+results go (dataset, synth, store, report, hydra), how runtimes are taken (timing) and where rows are scored
+(evaluation); cell and experiment pick the columns' values. The result store's key holds the values of every
+setting already (bench.harness.app `_cell`); `params` is what a reader sees: results.csv's column, job lines
+(`custom_d10_realsense offset_mm=2`) and the tables' row labels.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import json
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
 COLUMN_GROUPS = ("method", "freq", "prior", "grid", "cell", "experiment", "dataset", "synth")  # `group=option`
-NOT_PARAMS = ("dataset", "synth", "store", "report", "hydra", "timing", "device", "metrics.faithful",
+NOT_PARAMS = ("dataset", "synth", "store", "report", "hydra", "timing", "evaluation", "device", "metrics.faithful",
               "method._target_", "method.name", "freq.name", "prior.name", "grid.name")
 #: what tells two results rows apart: the capture frame, the columns of its configuration, and `params`
 ROW_IDENTITY = ("object", "distance", "frame", "method", "freq", "prior", "grid", "params", "device", "metrics")

@@ -125,6 +125,21 @@ class ResultsCsv:
                             .encode())
 
 
+_DEFERRED: list[BackgroundWriter] = []
+
+
+def defer(writer: BackgroundWriter) -> None:
+    """Let `writer` finish while the process goes on (the next job of a basic launcher's sweep): `finish_deferred`
+    waits for it, as does the interpreter's exit."""
+    _DEFERRED.append(writer)
+
+
+def finish_deferred() -> None:
+    """Wait for the deferred writers (their first error is raised here)."""
+    while _DEFERRED:
+        _DEFERRED.pop(0).close()
+
+
 class BackgroundWriter:
     """Output files written on one background thread, in the order given, while the caller computes the next
     capture (PNG compression, HDF5 and file writes release the interpreter lock). `close` waits for them; the first

@@ -75,6 +75,13 @@ def stage(name: str):
         end()
 
 
+def add_background(name: str, seconds: float) -> None:
+    """Seconds of stage `name` spent elsewhere (a worker process, bench.harness.workers), summed in `background_s`."""
+    if _on and seconds:
+        with _lock:
+            _background[name] += seconds
+
+
 def _timed_import(original):
     def __import__(name, globals=None, locals=None, fromlist=(), level=0):
         loaded = level == 0 and name in sys.modules and all(hasattr(sys.modules[name], f) for f in fromlist or ())

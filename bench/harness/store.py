@@ -196,24 +196,35 @@ class Store:
     def put(self, key: str, row: dict, arrays: dict[str, np.ndarray], attrs: dict) -> None:
         """Arrays (with `attrs`, e.g. the pixel grid) first, then the row, each atomically (module doc)."""
         self.cells.mkdir(parents=True, exist_ok=True)
-        image = io.BytesIO()
-        with h5py.File(image, "w") as h5:
-            _fill(h5, "/", arrays, attrs)
-        atomic.write_bytes(self.cells / f"{key}.h5", image.getvalue())
+        atomic.write_bytes(self.cells / f"{key}.h5", cell_image(arrays, attrs))
         atomic.write_bytes(self.cells / f"{key}.json", json.dumps(row, default=float).encode())
 
     def copy_arrays(self, key: str, path: Path, group: str, attrs: dict) -> None:
         """Add (or replace) `group` in the HDF5 file `path` holding the cell's arrays as `write_arrays` writes
         them, copied as stored: the compressed chunks are copied, not decompressed and compressed again (~1 ms
         instead of ~30 ms per capture on the 2-core machine). The cell is checked again as it is read."""
-        def add(h5: h5py.File) -> None:
-            node = _replace_group(h5, group)
-            for name in ARRAY_NAMES:
-                source.copy(source[name], node, name=name)
-            node.attrs.update(attrs)
-
         with self._open_cell(key) as source:
-            _update_h5(Path(path), add)
+            copy_cell(source, path, group, attrs)
+
+
+def cell_image(arrays: dict[str, np.ndarray], attrs: dict) -> bytes:
+    """A cell's HDF5 file as bytes: the arrays compressed as `write_arrays` compresses them, with `attrs`."""
+    image = io.BytesIO()
+    with h5py.File(image, "w") as h5:
+        _fill(h5, "/", arrays, attrs)
+    return image.getvalue()
+
+
+def copy_cell(source: h5py.File, path: Path, group: str, attrs: dict) -> None:
+    """Add (or replace) `group` in the HDF5 file `path` with the arrays of the cell `source` (a store's cell, or a
+    `cell_image` opened), their compressed chunks copied as they are, and `attrs`."""
+    def add(h5: h5py.File) -> None:
+        node = _replace_group(h5, group)
+        for name in ARRAY_NAMES:
+            source.copy(source[name], node, name=name)
+        node.attrs.update(attrs)
+
+    _update_h5(Path(path), add)
 
 
 def _read_digest(path: Path, roots: tuple[Path, ...]) -> str | None:

@@ -15,6 +15,7 @@ launcher's own settings before a multirun starts. The ranges:
 * dataset.frame: what bench.maroon.frames accepts; dataset.captures: null or relative <object>/<distance> folders.
 * roi: what methods.skips.settings accepts, its switches true/false and its margins finite (steps above 0).
 * profile.prior: sound | faithful; booleans (dataset.empty_filtered, metrics.faithful) true/false.
+* evaluation.workers: auto, or a whole number from 0 to 4 x the CPUs (bench.harness.workers).
 * joblib's n_jobs: a whole number, not 0, at least -(CPUs) (joblib: -1 = every CPU); the SLURM launchers'
   timeout_min >= 0, cpus_per_task >= 1, mem_gb null or >= 0.
 """
@@ -168,6 +169,9 @@ def check(cfg: DictConfig, memory: bool = True) -> None:
     if cfg.profile.prior not in PROFILE_PRIORS:
         _fail("profile.prior", cfg.profile.prior, " or ".join(PROFILE_PRIORS))
     boolean("metrics.faithful", cfg.metrics.faithful)
+    workers = OmegaConf.select(cfg, "evaluation.workers", default=0)
+    if workers != "auto":
+        number("evaluation.workers", workers, 0, 4 * (os.cpu_count() or 1), whole=True)
     if memory:
         _memory(cfg)
 

@@ -1,17 +1,19 @@
 """A whole experiment as a user runs it, its wall time beside its methods' and metrics' time, split by stage.
 
 `python -m bench.perf experiment NAME --root DIR [--device cpu|cuda] [--grid G] [--cells CELL ...] [--repeat N]
-[--out DIR]` runs `python -m bench -m experiment=NAME hydra/launcher=basic dataset=maroon dataset.root=DIR
-device=D` (one job at a time, as the demo runs it) in a fresh process with the stage clock on
+[--set KEY=VALUE ...] [--out DIR]` runs `python -m bench -m experiment=NAME hydra/launcher=basic dataset=maroon
+dataset.root=DIR device=D` (one job at a time, as the demo runs it) in a fresh process with the stage clock on
 (bench.harness.stages): seconds in composing the jobs' configurations, imports, reading captures, the ground
 truth, the methods (`methods.reconstruct` calls: prior, warm-up, method), the metrics, the output files (on the
-main thread: what it waited for; `outputs (background)` is the writer thread's time, overlapped), the merge
+main thread: what it waited for; `outputs (background)` is the writer thread's and the scoring workers' time,
+overlapped; with scoring workers, bench.harness.workers, the metrics are theirs, overlapped), the merge
 (tables and plots), and `other` (the interpreter, Hydra's start and its first composition, job set-up).
 Runs: `cold`, a store that keeps nothing yet (the ground truth is cast from the meshes), then `--repeat` runs
 `kept` on the store it left with its cells removed (every cell computes again; the ground truth kept by content
 is read back, as a second experiment on the same captures finds it). The ratio printed is wall / (methods +
-metrics); the targets (issue 29) are 1.3. Writes OUT/perf_experiment_<name>_<device>.csv (OUT = `--out`,
-default outputs/perf/), one row per run, with the machine's load.
+metrics, the workers' scoring included); the targets (issue 29) are 1.3. `--set KEY=VALUE ...` passes further
+overrides to every run (e.g. `evaluation.workers=0`). Writes OUT/perf_experiment_<name>_<device>.csv (OUT =
+`--out`, default outputs/perf/), one row per run, with the machine's load.
 """
 from __future__ import annotations
 
@@ -51,9 +53,10 @@ def run_once(name: str, root: Path, device: str, extra: list[str], store: Path, 
     row = {"experiment": name, "device": device, "rows": len(rows), "wall_s": wall_s, "load_1m_before": load_1m,
            **{f"{stage.replace(' ', '_')}_s": spent["stages_s"].get(stage, 0.0) for stage in STAGES}}
     row["outputs_background_s"] = spent["background_s"].get("outputs", 0.0)
+    row["metrics_workers_s"] = spent["background_s"].get("metrics", 0.0)
     row["other_s"] = wall_s - sum(spent["stages_s"].get(stage, 0.0) for stage in STAGES)
     row["method_runtime_s"] = float(rows.runtime_ms.sum()) / 1e3
-    row["methods_metrics_s"] = row["methods_s"] + row["metrics_s"]
+    row["methods_metrics_s"] = row["methods_s"] + row["metrics_s"] + row["metrics_workers_s"]
     row["ratio"] = wall_s / row["methods_metrics_s"]
     return row
 
@@ -62,7 +65,8 @@ def _print(row: dict, label: str) -> None:
     stages = "  ".join(f"{stage} {row[stage.replace(' ', '_') + '_s']:.2f}" for stage in STAGES)
     print(f"{label:5s} wall {row['wall_s']:6.1f} s = {row['ratio']:.2f} x methods+metrics "
           f"{row['methods_metrics_s']:.2f} s (methods' own runtimes {row['method_runtime_s']:.2f} s) | {stages}  "
-          f"other {row['other_s']:.2f}  [outputs on their thread {row['outputs_background_s']:.2f}]  "
+          f"other {row['other_s']:.2f}  [outputs on their thread {row['outputs_background_s']:.2f}, "
+          f"scoring in workers {row['metrics_workers_s']:.2f}]  "
           f"load {row['load_1m_before']:.1f}", flush=True)
 
 
@@ -87,12 +91,14 @@ def main(argv=None) -> int:
     parser.add_argument("--grid", default=None, help="grid config for every cell (e.g. bp_cpu on a small CPU)")
     parser.add_argument("--cells", nargs="+", default=None, help="only these cells of the experiment")
     parser.add_argument("--repeat", type=cli.positive_int, default=1, help="runs with the ground truth kept")
+    parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="further overrides of every run")
     add_out_option(parser)
     args = parser.parse_args(argv)
     root = cli.existing_path(args.root, "dir", "--root").resolve()
     device = cli.resolve_device(args.device)
     out = cli.output_dir(args.out)
     extra = ([f"grid={args.grid}"] if args.grid else []) + ([f"cell={','.join(args.cells)}"] if args.cells else [])
+    extra += args.set
     rows = measure(args.name, root, device, extra, args.repeat)
     write_rows(rows, out / f"perf_experiment_{args.name}_{device}.csv")
     return 0

@@ -46,16 +46,16 @@ class _InlineWriter:
 def timed_stages(spent: dict):
     """Wrap the functions the app calls with timers adding seconds to `spent[stage]`; restore them afterwards."""
     import methods
-    from bench.harness import app, captures, store
+    from bench.harness import app, captures, store, workers
     from bench.maroon import reader
 
     targets = [(reader, "read_capture", "read"), (captures, "ground_truth_rasters_m", "ground_truth"),
                (captures, "ground_truth_from_rasters", "ground_truth"), (captures, "load_kept", "ground_truth"),
                (app, "capture_files", "store_key"), (store.Store, "capture_digest", "store_key"),
                (store.Store, "get", "store"), (store.Store, "put", "store"), (store.Store, "copy_arrays", "outputs"),
-               (methods, "reconstruct", "method"), (app, "resample_depth_m", "metrics"),
-               (app, "evaluate", "metrics"), (app, "resample_nearest", "metrics"), (app, "write_depth", "outputs"),
-               (app, "write_arrays", "outputs"), (app.ResultsCsv, "add", "outputs")]
+               (methods, "reconstruct", "method"), (workers, "resample_depth_m", "metrics"),
+               (workers, "evaluate", "metrics"), (workers, "resample_nearest", "metrics"),
+               (app, "write_depth", "outputs"), (app, "write_arrays", "outputs"), (app.ResultsCsv, "add", "outputs")]
     originals = [(owner, name, getattr(owner, name)) for owner, name, _ in targets]
 
     def wrap(function, stage):
@@ -90,7 +90,8 @@ def measure(root: Path, cells: list[str], captures: list[str] | None, device: st
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         for name in each(cells, "cells", unit="cell"):
             overrides = [f"cell={name}", "dataset=maroon", f"dataset.root={root}", f"device={device}",
-                         f"store.dir={work / 'store' if use_store else 'null'}"]
+                         f"store.dir={work / 'store' if use_store else 'null'}",
+                         "evaluation.workers=0"]        # every stage in this thread, timed where it runs
             if captures:
                 overrides.append(f"dataset.captures=[{','.join(captures)}]")
             if grid:

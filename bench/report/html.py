@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import html
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -71,13 +72,31 @@ def table_name(root: Path) -> str:
     return root.name
 
 
-def spread(rows: pd.DataFrame) -> pd.DataFrame:
+@dataclass(frozen=True)
+class Scored:
+    """A sweep root's rows scored once for the whole page (the scoring and its bootstrap intervals are most of the
+    page's cost outside the pictures): the rows, their summary (bench.report.tables.summarise), the paired
+    comparisons and the per-capture outcomes (bench.report.scoring.outcomes)."""
+    rows: pd.DataFrame
+    summary: pd.DataFrame
+    pairs: pd.DataFrame
+    outcome: pd.DataFrame
+
+    @classmethod
+    def of(cls, rows: pd.DataFrame) -> Scored:
+        from bench.report import scoring, tables
+
+        summary, pairs = tables.summary_and_pairs(rows)
+        return cls(rows, summary, pairs, scoring.outcomes(rows))
+
+
+def spread(rows: pd.DataFrame, scored: Scored | None = None) -> pd.DataFrame:
     """Per summary row (bench.report.tables order): failures and, per metric, 'median [q25, q75]' in cm over the
     captures the table's means cover (the interquartile range says how much the captures disagree)."""
     from bench.report import scoring, tables
 
-    summary = tables.summarise(rows)
-    outcome = scoring.outcomes(rows)
+    scored = scored or Scored.of(rows)
+    summary, outcome = scored.summary, scored.outcome
     lines = []
     for _, line in summary.iterrows():
         entry = {"": line.row, "failed": f"{line.failed}/{line.captures}"}
@@ -94,14 +113,14 @@ def spread(rows: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(lines)
 
 
-def per_object(rows: pd.DataFrame, metric: str = "P_cm") -> pd.DataFrame:
+def per_object(rows: pd.DataFrame, metric: str = "P_cm", scored: Scored | None = None) -> pd.DataFrame:
     """`metric` (cm) per summary row (lines) and capture (columns 'object distance cm', marked where the table's
     means leave it out), 'failed: <reason>' where the row did not reconstruct the capture (with the metric where
     it is still defined) and 'not run' where it has no result."""
-    from bench.report import scoring, tables
+    from bench.report import scoring
 
-    summary = tables.summarise(rows)
-    outcome = scoring.outcomes(rows)
+    scored = scored or Scored.of(rows)
+    summary, outcome = scored.summary, scored.outcome
     matrix = scoring.metric_matrix(outcome, metric)
     common = set(scoring.common_captures(matrix))
     cells = outcome.set_index(["row_id", "capture"])
@@ -216,15 +235,14 @@ def _rows(root: Path) -> pd.DataFrame:
     return merge.merge(root) if not (root / "results.csv").is_file() else pd.read_csv(root / "results.csv")
 
 
-def verdict_section(roots: list[Path]) -> str:
+def verdict_section(roots: list[Path], scored: dict[Path, Scored] | None = None) -> str:
     """The page's opening: per sweep root the verdict (bench.report.verdict) as lists."""
     from bench.report import tables, verdict
 
     parts = ["<h2 id='verdict'>Verdict</h2>"]
     for root in roots:
-        rows = _rows(root)
-        summary = tables.summarise(rows)
-        found = verdict.verdict(summary, tables.paired_comparisons(rows))
+        root_scored = (scored or {}).get(root) or Scored.of(_rows(root))
+        found = verdict.verdict(root_scored.summary, root_scored.pairs)
         name = table_name(root)
         parts.append(f"<h3>{html.escape(tables.TITLES.get(name, name))}</h3>")
         parts.append("<p>Best mean per metric (95 % bootstrap interval over captures; the margin over the runner-up "
@@ -241,13 +259,13 @@ def verdict_section(roots: list[Path]) -> str:
     return "\n".join(parts)
 
 
-def root_section(root: Path, pictures: bool, page_dir: Path) -> tuple[str, str]:
+def root_section(root: Path, pictures: bool, page_dir: Path, scored: Scored | None = None) -> tuple[str, str]:
     """(table name, HTML section) of one sweep root; images linked relative to `page_dir`."""
     from bench.report import merge, tables
 
-    rows = _rows(root)
+    scored = scored or Scored.of(_rows(root))
+    rows, summary = scored.rows, scored.summary
     name = table_name(root)
-    summary = tables.summarise(rows)
     plot = merge.runtime_plot(root, name, summary)
     parts = [f"<h2 id='{html.escape(name)}'>{html.escape(tables.TITLES.get(name, name))} "
              f"<small>({html.escape(str(root))})</small></h2>",
@@ -255,8 +273,8 @@ def root_section(root: Path, pictures: bool, page_dir: Path) -> tuple[str, str]:
              "<h3>Means over captures</h3>", _means_table(summary),
              "<h3>Spread across captures</h3><p class='caption'>Median and interquartile range [25 %, 75 %] of "
              "each metric (cm) over the captures of the means.</p>",
-             _html_table(spread(rows)),
-             "<h3>Per object: P (cm)</h3>", _html_table(per_object(rows)),
+             _html_table(spread(rows, scored)),
+             "<h3>Per object: P (cm)</h3>", _html_table(per_object(rows, scored=scored)),
              "<h3>Runtime against error</h3>", _image(plot, f"{name} runtime against error", page_dir)]
     if pictures:
         parts += ["<h3>Pictures per capture</h3>", _pictures_section(root, page_dir)]
@@ -269,13 +287,14 @@ def write_report(roots: list[Path], out: Path, pictures: bool | list[Path] = Tru
     `out`. `pictures`: for every root (True), none (False) or the roots listed."""
     chosen = [Path(p).resolve() for p in pictures] if isinstance(pictures, list) else None
     page_dir = out.parent.resolve()
-    sections = [root_section(root, bool(pictures) if chosen is None else root.resolve() in chosen, page_dir)
-                for root in roots]
+    scored = {root: Scored.of(_rows(root)) for root in roots}
+    sections = [root_section(root, bool(pictures) if chosen is None else root.resolve() in chosen, page_dir,
+                             scored[root]) for root in roots]
     nav = " ".join(f"<a href='#{html.escape(name)}'>{html.escape(name)}</a>" for name, _ in sections)
     page = (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>mm2fsk-bench report</title>"
             f"<style>{_STYLE}</style></head><body><h1>mm2fsk-bench report</h1>"
             f"<p class='caption'>From {html.escape(', '.join(map(str, roots)))}; images are the files beside it."
-            f"</p><nav><a href='#verdict'>verdict</a> {nav}</nav>" + verdict_section(roots)
+            f"</p><nav><a href='#verdict'>verdict</a> {nav}</nav>" + verdict_section(roots, scored)
             + "\n".join(body for _, body in sections) + f"{_LOADED_CHECK}</body></html>\n")
     if out.is_file() and out.read_text(encoding="utf-8") == page:
         return out

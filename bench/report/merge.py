@@ -30,7 +30,8 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
 from bench import cli
-from bench.harness.results import write_results
+from bench.harness import stages
+from bench.harness.results import finish_deferred, write_results
 from methods.domain.errors import DatasetError
 
 
@@ -225,9 +226,13 @@ class MergeResults(Callback):
         # only the sweep's own process, from its main thread (a threading launcher's jobs must not fork mid-job)
         if (self._worker is None and self._sweep_pid == os.getpid()
                 and threading.current_thread() is threading.main_thread()):
+            with stages.stage("outputs"):
+                finish_deferred()        # no writer thread mid-write while the process forks
             self._worker = start_worker()
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
+        with stages.stage("outputs"):
+            finish_deferred()            # the last job's files (bench.harness.app: a basic launcher's jobs)
         root, table = Path(config.hydra.sweep.dir), config.report.table
         depth_errors = config.report.get("depth_errors", False)
         worker, self._worker = self._worker, None

@@ -8,13 +8,17 @@ capture's metric grid):
   relative to the capture's strongest pixel (the quantity the -14 dB filter thresholds, as in the paper), the
   ground-truth surface (the mesh rasterised on the same grid) is drawn in grey beneath them. The perspective view
   comes from Open3D's offscreen renderer where it runs (it needs a Vulkan driver, e.g. Debian's
-  `mesa-vulkan-drivers`), else from matplotlib (chosen at run time, `renderer()`); side and top views are
-  orthographic projections drawn by matplotlib, with axes in cm.
+  `mesa-vulkan-drivers`), else from matplotlib, projecting the points through the same camera (chosen at run time,
+  `renderer()`); side and top views are orthographic projections drawn by matplotlib, with axes in cm.
 * `point_clouds/<stem>/<cell>.ply` (radar points, magnitude colours) and `<stem>/ground_truth.ply`: metres, radar
   space (x right, y up, z away from the array).
 * `panels/<stem>.png`: ground truth and (where the dataset can be read) the RealSense prior, then one row per cell:
   depth, magnitude and the signed depth error (depth - ground truth, diverging colours: red = behind the surface,
-  blue = in front), "no depth" in grey and depth where there is no ground truth in black.
+  blue = in front), "no depth" in grey and depth where there is no ground truth in black; every map on the same
+  window, one colour bar per quantity beside the legend.
+
+The figures have fixed layouts (margins in inches): about half the CPU of matplotlib's constrained layout, which
+measured every tick label twice (docs/measurements/sweep.md, 2026-11-26 04:30).
 """
 from __future__ import annotations
 
@@ -34,6 +38,7 @@ import matplotlib.pyplot as plt  # noqa: E402  (after choosing the file-only bac
 import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from bench.report import keyed  # noqa: E402
 
@@ -210,14 +215,33 @@ def render_open3d(points: np.ndarray, colours: np.ndarray, gt_points: np.ndarray
     return np.asarray(renderer_.render_to_image())
 
 
+def project(points: np.ndarray, centre: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pinhole projection of (N, 3) radar-space points seen from `eye` looking at `centre` with y up (the camera
+    render_open3d sets up): (N, 2) image-plane coordinates (x to the right, y up; tangents of the view angles) and
+    the (N,) distances along the view direction."""
+    forward = (centre - eye) / np.linalg.norm(centre - eye)
+    right = np.cross([0.0, 1.0, 0.0], forward)
+    right /= np.linalg.norm(right)
+    up = np.cross(forward, right)
+    relative = np.asarray(points, np.float64) - eye
+    depth = relative @ forward
+    return np.column_stack([relative @ right, relative @ up]) / depth[:, None], depth
+
+
 def _draw_perspective_matplotlib(ax, points: np.ndarray, colours: np.ndarray, gt_points: np.ndarray) -> None:
-    """The same perspective view with matplotlib's 3D axes (depth into the picture, y up)."""
-    ax.scatter(gt_points[:, 0] * 100, gt_points[:, 2] * 100, gt_points[:, 1] * 100, s=0.2, c=GT_COLOUR,
-               depthshade=False)
-    ax.scatter(points[:, 0] * 100, points[:, 2] * 100, points[:, 1] * 100, s=0.6, c=colours, depthshade=False)
-    ax.set(xlabel="x (cm)", ylabel="z (cm)", zlabel="y (cm)")
-    ax.view_init(elev=20, azim=-60)
-    ax.tick_params(labelsize=6)
+    """The perspective view of render_open3d (same camera) drawn by matplotlib on 2D axes: the ground truth (grey),
+    then the radar points over it, each painted far to near. (2D axes: matplotlib's 3D axes cost about a third of
+    the figure.)"""
+    centre, eye = _perspective_camera(gt_points)
+    for xyz, rgb, size in ((gt_points, np.array([matplotlib.colors.to_rgb(GT_COLOUR)]), 0.2),
+                           (points, colours, 0.6)):
+        if len(xyz):
+            plane, depth = project(xyz, centre, eye)
+            order = np.argsort(-depth, kind="stable")
+            ax.scatter(plane[order, 0], plane[order, 1], s=size, c=rgb if len(rgb) == 1 else rgb[order],
+                       rasterized=True)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
 
 
 def _subsample(points: np.ndarray, *arrays: np.ndarray, at_most: int = 8000) -> tuple[np.ndarray, ...]:
@@ -240,8 +264,10 @@ def point_cloud_figure(cells: list[tuple[str, CaptureArrays]], stem: str, path: 
                                                                           (len(gt_points), 1)))
     ncols = min(len(cells), CELLS_PER_ROW)
     blocks = -(-len(cells) // ncols)
-    fig = plt.figure(figsize=(2.6 * ncols + 1.2, 8.4 * blocks), layout="constrained")
-    grid = fig.add_gridspec(3 * blocks, ncols)
+    width_in, height_in = 2.6 * ncols + 1.2, 8.4 * blocks
+    fig = plt.figure(figsize=(width_in, height_in))
+    grid = _fixed_grid(fig, 3 * blocks, ncols, left_in=0.6, right_in=1.1, top_in=0.75, bottom_in=0.7,
+                       hspace=0.45, wspace=0.12)
     gt_shown = _subsample(gt_points)[0]
     clouds = [points_m(c.depth_m, c.x_m, c.y_m)[0] for _, c in cells]
     x_cm, y_cm, z_cm = (_window_cm(gt_points, clouds, axis) for axis in range(3))
@@ -252,36 +278,46 @@ def point_cloud_figure(cells: list[tuple[str, CaptureArrays]], stem: str, path: 
         if ply_dir is not None:
             write_ply(ply_dir / stem / f"{_file_name(label)}.ply", points, colours)
         shown, shown_colours = _subsample(points, colours)
+        ax = fig.add_subplot(grid[3 * block, col])
         if use == "open3d":
-            ax = fig.add_subplot(grid[3 * block, col])
             ax.imshow(render_open3d(shown, shown_colours, gt_shown))
             ax.set_axis_off()
         else:
-            ax = fig.add_subplot(grid[3 * block, col], projection="3d")
             _draw_perspective_matplotlib(ax, shown, shown_colours, gt_shown)
         ax.set_title(f"{label}\n{len(points)} points", fontsize=8)
         side, top = fig.add_subplot(grid[3 * block + 1, col]), fig.add_subplot(grid[3 * block + 2, col])
         side.scatter(gt_shown[:, 2] * 100, gt_shown[:, 1] * 100, s=0.3, c=GT_COLOUR, rasterized=True)
         side.scatter(shown[:, 2] * 100, shown[:, 1] * 100, s=0.5, c=shown_colours, rasterized=True)
-        side.set(xlabel="z, depth (cm)", ylabel="y (cm)", xlim=z_cm, ylim=y_cm, title="side view (array left)")
+        side.set(xlabel="z, depth (cm)", xlim=z_cm, ylim=y_cm, title="side view (array left)")
         top.scatter(gt_shown[:, 0] * 100, gt_shown[:, 2] * 100, s=0.3, c=GT_COLOUR, rasterized=True)
         top.scatter(shown[:, 0] * 100, shown[:, 2] * 100, s=0.5, c=shown_colours, rasterized=True)
-        top.set(xlabel="x (cm)", ylabel="z, depth (cm)", xlim=x_cm, ylim=z_cm, title="top view (array below)")
-        for ax in (side, top):
-            ax.title.set_fontsize(8)
-            ax.tick_params(labelsize=7)
-            ax.xaxis.label.set_fontsize(7)
-            ax.yaxis.label.set_fontsize(7)
+        top.set(xlabel="x (cm)", xlim=x_cm, ylim=z_cm, title="top view (array below)")
+        for view, ylabel in ((side, "y (cm)"), (top, "z, depth (cm)")):
+            view.title.set_fontsize(8)
+            view.tick_params(labelsize=7, labelleft=col == 0)   # every column has the same limits
+            view.xaxis.label.set_fontsize(7)
+            if col == 0:
+                view.set_ylabel(ylabel, fontsize=7)
     bar = plt.cm.ScalarMappable(plt.Normalize(-MAGNITUDE_RANGE_DB, 0), cmap="plasma")
-    fig.colorbar(bar, ax=fig.axes, shrink=0.6, label="residual phasor magnitude (dB re strongest pixel)")
-    fig.legend(handles=[Patch(color=GT_COLOUR, label="ground truth")], loc="outside lower left", fontsize=8)
+    fig.colorbar(bar, cax=fig.add_axes((1 - 0.85 / width_in, 0.25, 0.15 / width_in, 0.5)),
+                 label="residual phasor magnitude (dB re strongest pixel)")
+    fig.legend(handles=[Patch(color=GT_COLOUR, label="ground truth")], loc="lower left", fontsize=8)
     renderer_note = "Open3D offscreen" if use == "open3d" else "matplotlib"
     fig.suptitle(f"{stem}: radar point clouds over the ground truth (grey), coloured by magnitude; "
-                 f"perspective view by {renderer_note}", fontsize=9)
+                 f"perspective view by {renderer_note}", fontsize=9, y=1 - 0.15 / height_in, va="top")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def _fixed_grid(fig, rows: int, cols: int, left_in: float, right_in: float, top_in: float, bottom_in: float,
+                hspace: float, wspace: float):
+    """A GridSpec over `fig` with margins in inches. The layout is fixed rather than constrained: matplotlib's
+    constrained layout measured every tick label of these figures twice and was about 40 % of their cost."""
+    width_in, height_in = fig.get_size_inches()
+    return fig.add_gridspec(rows, cols, left=left_in / width_in, right=1 - right_in / width_in,
+                            bottom=bottom_in / height_in, top=1 - top_in / height_in, hspace=hspace, wspace=wspace)
 
 
 def _window_cm(gt_points: np.ndarray, clouds: list[np.ndarray], axis: int, margin_cm: float = 2.0
@@ -329,7 +365,8 @@ def crop_cm(cells: list[CaptureArrays], margin_cm: float = 1.0) -> tuple[tuple, 
 
 def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
                   prior_m: np.ndarray | None = None) -> Path:
-    """Per capture: ground truth and prior on top, then per cell depth, magnitude (dB) and signed error (cm)."""
+    """Per capture: ground truth and prior on top, then per cell depth, magnitude (dB) and signed error (cm); every
+    map on the same x, y window, one colour bar per quantity (top right, with the legend)."""
     arrays = [cell for _, cell in cells]
     truth = arrays[0]
     xlim, ylim = crop_cm(arrays)
@@ -337,47 +374,62 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
                               [truth.gt_depth_m[np.isfinite(truth.gt_depth_m)]]) * 100
     depth_range = (np.percentile(depth_cm, 1), np.percentile(depth_cm, 99)) if depth_cm.size else (20.0, 40.0)
     depth_map = plt.get_cmap("viridis").with_extremes(bad=NO_DEPTH_COLOUR)
+    level_map = plt.get_cmap("plasma").with_extremes(bad=NO_DEPTH_COLOUR)
     error_map = plt.get_cmap("RdBu_r").with_extremes(bad=NO_DEPTH_COLOUR)
     overlay_map = ListedColormap([NO_DEPTH_COLOUR, NO_TRUTH_COLOUR])
-    fig, axes = plt.subplots(len(cells) + 1, 3, figsize=(10.5, 3.0 * (len(cells) + 1) + 0.6), squeeze=False,
-                             layout="constrained")
+    fig = plt.figure(figsize=(10.5, 3.0 * (len(cells) + 1) + 0.6))
+    axes = _fixed_grid(fig, len(cells) + 1, 3, left_in=0.7, right_in=0.2, top_in=0.5, bottom_in=0.5,
+                       hspace=0.25, wspace=0.1).subplots(squeeze=False)   # not shared: 45 linked axes cost more
 
-    def show(ax, image, cmap, vmin, vmax, title, bar_label, extend="neither"):
+    def show(ax, image, cmap, vmin, vmax, title):
         drawn = ax.imshow(image, extent=truth.extent_cm, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
-        ax.set(xlim=xlim, ylim=ylim, xlabel="x (cm)", ylabel="y (cm)")
         ax.set_title(title, fontsize=8)
         ax.tick_params(labelsize=7)
-        fig.colorbar(drawn, ax=ax, shrink=0.85, extend=extend).set_label(bar_label, fontsize=7)
         return drawn
 
-    show(axes[0, 0], truth.gt_depth_m * 100, depth_map, *depth_range, "ground truth depth", "depth z (cm)")
+    depth_drawn = show(axes[0, 0], truth.gt_depth_m * 100, depth_map, *depth_range, "ground truth depth")
     if prior_m is not None:
-        show(axes[0, 1], prior_m * 100, depth_map, *depth_range, "RealSense prior (MM-2FSK)", "depth z (cm)")
+        show(axes[0, 1], prior_m * 100, depth_map, *depth_range, "RealSense prior (MM-2FSK)")
     else:
         axes[0, 1].set_axis_off()
         axes[0, 1].text(0.5, 0.5, "prior not available\n(dataset not readable here)", ha="center",
                         transform=axes[0, 1].transAxes, fontsize=8)
-    axes[0, 2].set_axis_off()
-    axes[0, 2].legend(handles=[Patch(color=NO_DEPTH_COLOUR, label="no depth (filtered or not returned)"),
-                               Patch(color=NO_TRUTH_COLOUR, label="depth where the ground truth has no surface"),
-                               Patch(color=plt.get_cmap("RdBu_r")(1.0), label="error > 0: behind the surface"),
-                               Patch(color=plt.get_cmap("RdBu_r")(0.0), label="error < 0: in front of it")],
-                      loc="center", fontsize=8, frameon=False)
     for row, (label, cell) in enumerate(cells, start=1):
-        show(axes[row, 0], cell.depth_m * 100, depth_map, *depth_range, f"{label}: depth", "depth z (cm)")
+        show(axes[row, 0], cell.depth_m * 100, depth_map, *depth_range, f"{label}: depth")
         valid = np.isfinite(cell.depth_m)
         reference = np.abs(cell.magnitude[valid]).max() if valid.any() else 1.0
         level = np.where(valid, magnitude_db(cell.magnitude, reference or 1.0), np.nan)
-        show(axes[row, 1], level, plt.get_cmap("plasma").with_extremes(bad=NO_DEPTH_COLOUR), -MAGNITUDE_RANGE_DB,
-             0, f"{label}: magnitude", "dB re strongest pixel", extend="min")
-        error = signed_error_cm(cell)
-        show(axes[row, 2], error, error_map, -SIGNED_ERROR_LIMIT_CM, SIGNED_ERROR_LIMIT_CM,
-             f"{label}: depth - ground truth", f"signed error (cm), saturates at ±{SIGNED_ERROR_LIMIT_CM:g}",
-             extend="both")
+        level_drawn = show(axes[row, 1], level, level_map, -MAGNITUDE_RANGE_DB, 0, f"{label}: magnitude")
+        error_drawn = show(axes[row, 2], signed_error_cm(cell), error_map, -SIGNED_ERROR_LIMIT_CM,
+                           SIGNED_ERROR_LIMIT_CM, f"{label}: depth - ground truth")
         axes[row, 2].imshow(no_error_categories(cell), extent=truth.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
                             interpolation="nearest")
-        axes[row, 2].set(xlim=xlim, ylim=ylim)
-    fig.suptitle(f"{stem}: depth, magnitude and signed error per method (x, y in cm, radar space)", fontsize=9)
+    for (row, col), ax in np.ndenumerate(axes):       # one window for every map: labels on the outer axes only
+        ax.set(xlim=xlim, ylim=ylim)
+        ax.tick_params(labelleft=col == 0, labelbottom=row == len(cells))
+        if col == 0:
+            ax.set_ylabel("y (cm)", fontsize=7)
+        if row == len(cells):
+            ax.set_xlabel("x (cm)", fontsize=7)
+    key = axes[0, 2]
+    key.set_axis_off()
+    key.legend(handles=[Patch(color=NO_DEPTH_COLOUR, label="no depth (filtered or not returned)"),
+                        Patch(color=NO_TRUTH_COLOUR, label="depth where the ground truth has no surface"),
+                        Patch(color=error_map(1.0), label="error > 0: behind the surface"),
+                        Patch(color=error_map(0.0), label="error < 0: in front of it")],
+               loc="upper center", fontsize=7, frameon=False, borderaxespad=0)
+    for number, (drawn, bar_label, extend) in enumerate((
+            (depth_drawn, "depth z (cm)", "neither"),
+            (level_drawn if cells else depth_drawn, "magnitude (dB re strongest pixel)", "min"),
+            (error_drawn if cells else depth_drawn, f"signed error (cm), saturates at ±{SIGNED_ERROR_LIMIT_CM:g}",
+             "both"))):
+        bar = fig.colorbar(drawn, cax=key.inset_axes((0.05, 0.52 - 0.24 * number, 0.9, 0.05)),
+                           orientation="horizontal", extend=extend)
+        bar.set_label(bar_label, fontsize=7)
+        bar.ax.tick_params(labelsize=7)
+        bar.ax.xaxis.set_major_locator(MaxNLocator(5))
+    fig.suptitle(f"{stem}: depth, magnitude and signed error per method (x, y in cm, radar space)", fontsize=9,
+                 y=1 - 0.1 / fig.get_size_inches()[1], va="top")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -66,7 +66,10 @@ def outcomes(rows: pd.DataFrame, floor_pct: float = COVERAGE_FLOOR_PCT) -> pd.Da
     frames_per_capture = rows[CAPTURE_COLUMNS].drop_duplicates().groupby(PER_CAPTURE).size().rename("_expected")
     values = [c for c in (*METRICS_CM, "coverage_pct", "off_pct", "off_px", "off_err_cm") if c in rows]
     grouped = rows.groupby(keys + PER_CAPTURE, sort=False)
-    lines = grouped[values].agg(lambda v: v.mean() if v.notna().all() else np.nan)
+    if grouped.ngroups == len(rows):     # one frame per capture: each value is its own mean (NaN where undefined)
+        lines = grouped[values].mean()
+    else:
+        lines = grouped[values].agg(lambda v: v.mean() if v.notna().all() else np.nan)
     lines["_frames"] = grouped.size()
     lines["reason"] = grouped["_reason"].agg(lambda r: next((x for x in r if x), ""))
     lines = lines.reset_index().join(frames_per_capture, on=PER_CAPTURE)

@@ -136,17 +136,23 @@ def _against_best(summary: pd.DataFrame, matrices: dict[str, pd.DataFrame], comm
     columns `<metric>_vs`, `_better`, `_worse`, `_pairs` (captures compared) and `_p` (bench.report.uncertainty)."""
     for metric in METRICS_CM:
         order = summary[f"{metric}_rank"].dropna().sort_values(kind="stable").index
+        against = {index: order[1] if len(order) > 1 and index == order[0] else (order[0] if len(order) else None)
+                   for index in summary.index}
+        against = {index: other for index, other in against.items() if other is not None and other != index}
+        matrix = matrices[metric][common[metric]]
+        values = dict(zip(matrix.index, matrix.to_numpy(), strict=True))
+        results = dict(zip(against, uncertainty.paired_all(
+            [(values[summary.row_id[index]], values[summary.row_id[other]]) for index, other in against.items()]),
+            strict=True))
         columns = {k: [] for k in ("vs", "better", "worse", "pairs", "p")}
         for index in summary.index:
-            other = order[1] if len(order) > 1 and index == order[0] else (order[0] if len(order) else None)
-            if other is None or other == index:
+            if index not in results:
                 for k, empty in (("vs", ""), ("better", 0), ("worse", 0), ("pairs", 0), ("p", np.nan)):
                     columns[k].append(empty)
                 continue
-            matrix = matrices[metric][common[metric]]
-            result = uncertainty.paired(matrix.loc[summary.row_id[index]], matrix.loc[summary.row_id[other]])
-            for k, value in (("vs", summary.row[other]), ("better", result.a_better), ("worse", result.b_better),
-                             ("pairs", result.n), ("p", result.p_value)):
+            result = results[index]
+            for k, value in (("vs", summary.row[against[index]]), ("better", result.a_better),
+                             ("worse", result.b_better), ("pairs", result.n), ("p", result.p_value)):
                 columns[k].append(value)
         for k, values in columns.items():
             summary[f"{metric}_{k}"] = values
@@ -174,13 +180,18 @@ def _scored(rows: pd.DataFrame, floor_pct: float) -> tuple[pd.DataFrame, pd.Data
     matrices = {m: scoring.metric_matrix(outcome, m) for m in shown}
     common = {m: scoring.common_captures(matrices[m]) for m in shown}
     n_captures = outcome.capture.nunique()
+    intervals = {}                   # (metric, row_id) -> Interval, bootstrapped together per metric
+    for metric in shown:
+        matrix = matrices[metric][common[metric]]
+        intervals.update(zip([(metric, row_id) for row_id in matrix.index],
+                             uncertainty.mean_intervals(matrix.to_numpy()), strict=True))
     lines = []
     for row_id, part in outcome.groupby("row_id", sort=True):
         identity = part.iloc[0][keys].to_dict()
         line = {"row_id": row_id, **identity, "captures": n_captures, "failed": int((~part.ok).sum()),
                 "ok": int(part.ok.sum()), "failures": _failures_text(part)}
         for metric in shown:
-            interval = uncertainty.mean_interval(matrices[metric].loc[row_id, common[metric]])
+            interval = intervals[metric, row_id]
             line.update({metric: interval.mean, f"{metric}_low": interval.low, f"{metric}_high": interval.high,
                          f"{metric}_n": interval.n})
         line["off_err_cm"] = _weighted_off_error_cm(part[part.capture.isin(common.get("off_pct", []))])
@@ -227,8 +238,10 @@ def summary_and_pairs(rows: pd.DataFrame, floor_pct: float = scoring.COVERAGE_FL
     lines = []
     for metric in METRICS_CM:
         matrix = matrices[metric][common[metric]]
-        for (i, a), (j, b) in itertools.combinations(summary[["row_id", "row"]].itertuples(index=False), 2):
-            result = uncertainty.paired(matrix.loc[i], matrix.loc[j])
+        values = dict(zip(matrix.index, matrix.to_numpy(), strict=True))
+        combinations = list(itertools.combinations(summary[["row_id", "row"]].itertuples(index=False), 2))
+        results = uncertainty.paired_all([(values[i], values[j]) for (i, _), (j, _) in combinations])
+        for ((_, a), (_, b)), result in zip(combinations, results, strict=True):
             lines.append({"metric": metric, "a": a, "b": b, "captures": result.n, "a_better": result.a_better,
                           "b_better": result.b_better, "mean_diff_cm": result.mean_diff, "p": result.p_value})
     return summary, pd.DataFrame(lines, columns=PAIR_COLUMNS)

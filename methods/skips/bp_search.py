@@ -120,13 +120,29 @@ def point_target_loss_db(freqs_hz: np.ndarray, antennas: AntennaArray, points_m:
         def side_sum(ant_m, column=column, p=p):
             delta = (np.linalg.norm(column[:, None] - ant_m[None], axis=2)
                      - np.linalg.norm(p[None] - ant_m, axis=1)[None])              # (Z, A) path change
-            return np.exp(1j * delta[:, :, None] * k[None, None]).sum(axis=1)    # (Z, F)
+            return _phasor_sums(delta, k)
         mag = np.abs((side_sum(antennas.rx_m) * side_sum(antennas.tx_m)).sum(axis=1))
         peak_z = fine_m[np.argmax(mag)]
         for side in (-1.0, 1.0):
             at = np.interp(peak_z + side * offsets_m, fine_m, mag)
             worst = np.maximum(worst, 20.0 * np.log10(mag.max() / np.maximum(at, 1e-30)))
     return worst
+
+
+def _phasor_sums(delta_m: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """sum_a exp(j k_f delta_a) (Z, F) for path changes delta_m (Z, A) and wavenumbers k (F,). Equidistant k
+    (BP_max's 128) factor as k_(i + n j) = (k_0 + i dk) + n j dk: per depth one (n_hi, A) x (A, n) complex product of
+    n + n_hi phasor tables instead of F phasors per antenna (5x less work; equal to the direct sum within ~1e-15
+    relative, float64)."""
+    n_f = len(k)
+    n = int(np.ceil(np.sqrt(n_f)))
+    dk = (k[-1] - k[0]) / max(n_f - 1, 1)
+    if n_f < 16 or not np.allclose(np.diff(k), dk, rtol=1e-9, atol=0.0):
+        return np.exp(1j * delta_m[:, :, None] * k[None, None]).sum(axis=1)
+    n_hi = -(-n_f // n)
+    lo = np.exp(1j * delta_m[:, :, None] * (k[0] + dk * np.arange(n))[None, None])          # (Z, A, n)
+    hi = np.exp(1j * delta_m[:, None, :] * (dk * n * np.arange(n_hi))[None, :, None])       # (Z, n_hi, A)
+    return np.matmul(hi, lo).reshape(len(delta_m), n_hi * n)[:, :n_f]
 
 
 PROBE_RADII_M = tuple(np.round(np.arange(0.0, 0.2201, 0.02), 3))   # probe distances from the array axis, m

@@ -10,13 +10,15 @@ import pytest
 from bench import demo
 
 
-def _fake_sweep(experiment, root, out, store, synth="realistic", distances_cm=None):
+def _fake_sweep(experiment, root, out, store, synth="realistic", distances_cm=None, depth_errors=False):
     """What a finished sweep leaves in its root (bench.report.merge), in miniature."""
     folder = out / experiment
-    (folder / "depth_errors").mkdir(parents=True)
+    folder.mkdir(parents=True)
     for name in demo.REPORT_FILES:
         (folder / name.format(table=experiment)).write_text(f"{experiment}\n")
-    (folder / "depth_errors" / "01_plate_30_000000.png").write_bytes(b"png")
+    if depth_errors:
+        (folder / "depth_errors").mkdir()
+        (folder / "depth_errors" / "01_plate_30_000000.png").write_bytes(b"png")
     rows = pd.DataFrame({"object": ["01_plate"], "distance": [30], "frame": [0], "method": ["mm2fsk"], "freq": ["d10"],
                          "prior": ["photogrammetry" if experiment == "table2" else "realsense"],
                          "grid": ["from_capture"],
@@ -53,14 +55,16 @@ def test_the_preset_and_distances_reach_generation_and_every_sweep(monkeypatch, 
     seen = []
     monkeypatch.setattr(demo, "generate_dataset", lambda root, synth, distances_cm: seen.append(("data", synth,
                                                                                                  distances_cm)))
-    monkeypatch.setattr(demo, "sweep", lambda *a, synth, distances_cm: (seen.append((a[0], synth, distances_cm)),
-                                                                        _fake_sweep(*a))[1])
+    monkeypatch.setattr(demo, "sweep", lambda *a, synth, distances_cm, depth_errors: (
+        seen.append((a[0], synth, distances_cm, depth_errors)), _fake_sweep(*a))[1])
     monkeypatch.setattr(demo, "report_page", lambda out: out / "report.html")
     monkeypatch.setattr(sys, "argv", ["bench.demo", "--root", str(tmp_path / "data"), "--out", str(tmp_path / "out"),
                                       "--store", str(tmp_path / "store"), "--synth", "ideal", "--distances", "30",
                                       "45"])
     assert demo.main() == 0
-    assert seen == [("data", "ideal", [30, 45]), ("table2", "ideal", [30, 45]), ("table3", "ideal", [30, 45])]
+    # the depth-error figures only where --update-results publishes them (the report's panels show table3's)
+    assert seen == [("data", "ideal", [30, 45]), ("table2", "ideal", [30, 45], False),
+                    ("table3", "ideal", [30, 45], False)]
     objects, distances = demo.demo_captures([30, 45])
     assert distances == [30, 45] and "01_plate" in objects
     assert demo.demo_captures(None)[1] == [30]                  # configs/dataset/synthetic.yaml

@@ -140,6 +140,8 @@ ABSURD = {   # override(s) -> the start of the one line
     "roi_unknown": (["+roi=none", "+roi.bogus=1"], "roi={'name': 'none', 'preset': 'none', 'bogus': 1}: unknown roi"),
     "profile_prior": (["profile.prior=fair"], "profile.prior=fair: must be sound or faithful"),
     "empty_filtered_text": (["dataset.empty_filtered=sometimes"], "dataset.empty_filtered=sometimes: must be true"),
+    "workers_negative": (["evaluation.workers=-2"], "evaluation.workers=-2: must be a whole number >= 0"),
+    "workers_text": (["evaluation.workers=many"], "evaluation.workers=many: must be a whole number"),
 }
 
 

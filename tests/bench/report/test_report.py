@@ -86,6 +86,26 @@ def test_signed_error_keeps_the_direction_of_a_wrap():
     assert pictures.signed_error_cm(in_front)[0, 0] == pytest.approx(-3.0)
 
 
+def test_the_matplotlib_perspective_is_a_pinhole_view_from_the_open3d_camera():
+    seed = int(np.random.default_rng().integers(1 << 31))              # fresh inputs each run, the seed printed
+    print(f"seed {seed}")
+    rng = np.random.default_rng(seed)
+    surface = rng.uniform([-0.05, -0.05, 0.28], [0.05, 0.05, 0.32], (200, 3))
+    centre, eye = pictures._perspective_camera(surface)
+    plane, depth = pictures.project(np.vstack([centre, centre + [0.01, 0, 0], centre + [0, 0.01, 0]]), centre, eye)
+    np.testing.assert_allclose(plane[0], 0.0, atol=1e-12)              # the camera looks at the centre
+    assert plane[1, 0] > 0 and plane[2, 1] > 0                          # x to the right, y up, as in radar space
+    np.testing.assert_allclose(depth[0], np.linalg.norm(centre - eye), rtol=1e-12)
+    points = rng.uniform([-0.1, -0.1, 0.2], [0.1, 0.1, 0.4], (500, 3))
+    plane, depth = pictures.project(points, centre, eye)
+    rays, forward = points - eye, (centre - eye) / np.linalg.norm(centre - eye)
+    angle = np.arccos(np.clip(rays @ forward / np.linalg.norm(rays, axis=1), -1, 1))   # float64 reference
+    np.testing.assert_allclose(np.hypot(*plane.T), np.tan(angle), rtol=1e-9, atol=1e-12)
+    far_plane, far_depth = pictures.project(eye + 2 * rays, centre, eye)   # twice as far along the same rays
+    np.testing.assert_allclose(far_plane, plane, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(far_depth, 2 * depth, rtol=1e-12)
+
+
 def test_renderer_is_chosen_at_run_time(monkeypatch):
     monkeypatch.setattr(pictures, "_open3d_renders", lambda: False)
     monkeypatch.delenv("BENCH_RENDERER", raising=False)

@@ -1,0 +1,160 @@
+"""Scoring a computed capture (metrics, its row, its depth files and store cell) in worker processes.
+
+On a GPU the methods take milliseconds while scoring a capture takes tens (resampling onto the metric grid and
+`metrics.evaluate`: 20-30 ms a row, BP's dense maps the most) and writing its depth PNGs and store cell as much
+again: done in the main thread, that is most of a sweep. With `evaluation.workers` N > 0 each computed capture is
+handed to a pool of N processes while the main thread reads and reconstructs the next one; the run's ordered files
+(results.csv lines, arrays.h5) are still written in capture order by its writer thread, each waiting for its
+capture's result. The numbers are those of the main thread's scoring (the same functions on the same arrays).
+
+Off by default (`evaluation.workers=0`): the workers share the host with the timed calls, and on the H100 host that
+moved the methods' runtimes by +5-10 % (BP) and up to +80 % (a ~1 ms FSK median; docs/measurements/sweep.md), so
+rows scored beside workers are timed 'parallel' and tables show no runtime for them: for sweeps whose errors, not
+runtimes, are wanted. `auto` is N = min(cores - 2, MAX_AUTO_WORKERS) for a GPU job that runs alone, 0 where other
+jobs of the sweep share the machine (joblib, SLURM arrays) and on the CPU devices, whose methods use every core.
+The pool is started once per process, from a fresh interpreter (multiprocessing's forkserver: never forked from a
+process holding CUDA or threads), and serves every later job of a basic launcher's sweep.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import multiprocessing
+import os
+import pickle
+import threading
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from bench.harness.results import write_depth
+from methods.domain.capture import RadarGrid
+from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
+from metrics.resample import resample_depth_m, resample_nearest
+
+MAX_AUTO_WORKERS = 6
+HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: 'auto' leaves them every core
+# what a worker imports before it takes work (in the fork server: once for all workers): scoring, the cell's HDF5,
+# the KD-trees and the depth previews' colour map
+_PRELOAD = ["bench.harness.workers", "bench.harness.store", "scipy.spatial", "matplotlib.cm"]
+
+
+@dataclasses.dataclass
+class Scoring:
+    """What scoring one reconstruction needs: its maps on the grid it was computed on, the capture's metric grid and
+    ground truth (None: no mesh), the profile, and the method's own reason for an all-invalid result."""
+
+    depth_m: np.ndarray
+    magnitude: np.ndarray
+    computed_grid: RadarGrid
+    metric_grid: RadarGrid
+    gt: GroundTruth | None
+    faithful: bool
+    invalid_reason: str | None
+
+
+class Pickled:
+    """A ground truth handed to workers as the bytes it was pickled to once (`shipped`): every task of a capture
+    then copies ~3 MB of bytes instead of pickling its arrays again while the next timed call runs."""
+
+    def __init__(self, data: bytes):
+        self.data = data
+
+    def __reduce__(self):
+        return pickle.loads, (self.data,)
+
+
+_SHIPPED: dict[int, tuple[GroundTruth, Pickled]] = {}
+
+
+def shipped(gt: GroundTruth | None) -> GroundTruth | Pickled | None:
+    """`gt` as it goes to a worker, pickled once per ground truth (the sweep's captures: a few kept at a time)."""
+    if gt is None:
+        return None
+    if id(gt) not in _SHIPPED:
+        if len(_SHIPPED) >= 32:
+            _SHIPPED.pop(next(iter(_SHIPPED)))
+        _SHIPPED[id(gt)] = gt, Pickled(pickle.dumps(gt, protocol=pickle.HIGHEST_PROTOCOL))
+    return _SHIPPED[id(gt)][1]
+
+
+def score(task: Scoring) -> tuple[dict, dict]:
+    """(metric columns, arrays on the metric grid: depth_m, magnitude, gt_depth_m) of a reconstruction."""
+    depth_m = resample_depth_m(task.depth_m, task.computed_grid, task.metric_grid)
+    if task.gt is not None:
+        scores, gt_depth_m = evaluate(depth_m, task.gt, faithful=task.faithful), task.gt.depth_m
+    else:
+        scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
+    magnitude = resample_nearest(task.magnitude, task.computed_grid, task.metric_grid)
+    if task.invalid_reason:       # the method's own account of an all-invalid result, not just 'no valid'
+        scores["failure"] = task.invalid_reason
+    return scores, {"depth_m": depth_m, "magnitude": magnitude, "gt_depth_m": gt_depth_m}
+
+
+@functools.lru_cache(maxsize=4)
+def _store(root: str):
+    from bench.harness.store import Store
+
+    return Store(root)
+
+
+def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None
+                    ) -> tuple[dict, bytes | None, dict[str, float]]:
+    """In a worker: score the reconstruction into `row` (its score columns), write the depth PNG, JSON and preview
+    and, with a store, the cell (arrays, then the row). Returns (row, where there is no store to copy the arrays
+    from the cell's image, bench.harness.store.cell_image, else None, seconds spent on metrics and outputs)."""
+    from bench.harness.store import cell_image
+
+    started = time.perf_counter()
+    scores, arrays = score(task)
+    row.update(scores)
+    scored = time.perf_counter()
+    write_depth(out_dir, stem, arrays["depth_m"], task.metric_grid)
+    if store_root is not None:
+        _store(store_root).put(row["key"], row, arrays, grid_attrs)
+        image = None
+    else:
+        image = cell_image(arrays, grid_attrs)
+    return row, image, {"metrics": scored - started, "outputs": time.perf_counter() - scored}
+
+
+def pool_size(setting, device: str, shared: bool = False) -> int:
+    """Workers for `evaluation.workers` (a whole number >= 0, or 'auto': module doc) on the resolved `device`;
+    `shared`: other jobs of the sweep run beside this one (joblib, SLURM arrays), which 'auto' leaves the cores to."""
+    if setting == "auto":
+        if device in HOST_DEVICES or shared:
+            return 0
+        return max(0, min((os.cpu_count() or 1) - 2, MAX_AUTO_WORKERS))
+    return int(setting)
+
+
+_POOLS: dict[int, ProcessPoolExecutor] = {}
+
+
+def pool(workers: int) -> ProcessPoolExecutor | None:
+    """The process's pool of `workers` processes (None for 0), started on first use and kept for later jobs."""
+    if workers <= 0:
+        return None
+    if workers not in _POOLS:
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
+        _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context)
+        # its processes started by another thread: the fork server's imports (~1 s) and the workers' starts happen
+        # while this one goes on (Warp's start, reading, the first reconstruction), not when it hands over work
+        threading.Thread(target=_start, args=(_POOLS[workers], workers), name="workers-start", daemon=True).start()
+    return _POOLS[workers]
+
+
+def _start(pool: ProcessPoolExecutor, workers: int) -> None:
+    """Start every worker (a pool starts one per task handed over while none is idle)."""
+    for started in [pool.submit(int) for _ in range(workers)]:
+        started.result()
+
+
+def done(value) -> Future:
+    """A finished future holding `value` (what the main thread computed itself)."""
+    future = Future()
+    future.set_result(value)
+    return future

@@ -1,0 +1,97 @@
+"""Captures scored in worker processes (bench.harness.workers): the same rows, depth files, arrays and store cells as
+scored in the main thread, their runtimes labelled as taken beside other work; a run whose last files are deferred."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+from hydra import compose, initialize_config_dir
+
+from bench.harness import CONFIG_DIR, workers
+from bench.harness.app import run
+from bench.harness.results import MEASURED_COLUMNS, finish_deferred
+
+from hostile_tools import copy_capture
+
+VOLATILE = (*MEASURED_COLUMNS, "hostname")
+
+
+@pytest.fixture(scope="module")
+def root(synth_capture, tmp_path_factory):
+    """Two small captures (16 frequencies)."""
+    root = tmp_path_factory.mktemp("workers_root")
+    for name in ("01_plate", "03_sphere"):
+        copy_capture(synth_capture(name, 30, frequency_points=16), root, name, "30")
+    return root
+
+
+def _run(root: Path, out: Path, store: Path | None, n_workers: int, defer: bool = False) -> list[dict]:
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose(config_name="config", overrides=[
+            "dataset=maroon", f"dataset.root={root}", "method=2fsk", "freq=d05", "prior=none",
+            f"store.dir={store if store is not None else 'null'}", f"evaluation.workers={n_workers}"])
+    return run(cfg, out, defer_outputs=defer)
+
+
+def _stable(table: pd.DataFrame) -> pd.DataFrame:
+    return table.drop(columns=[c for c in table.columns if c in VOLATILE or (c.startswith("t_") and c.endswith("_ms"))])
+
+
+def _files(out: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*"))
+            if p.is_file() and p.suffix in (".png", ".json")}
+
+
+def _arrays(path: Path) -> dict[str, np.ndarray]:
+    with h5py.File(path) as h5:
+        return {f"{group}/{name}": h5[group][name][()] for group in h5 for name in h5[group]}
+
+
+@pytest.mark.parametrize("with_store", [True, False])
+def test_rows_and_files_scored_by_workers_are_those_scored_in_the_main_thread(root, tmp_path, with_store):
+    stores = {n: (tmp_path / f"store{n}" if with_store else None) for n in (0, 1)}
+    rows = {n: _run(root, tmp_path / f"out{n}", stores[n], n) for n in (0, 1)}
+    assert [r["object"] for r in rows[1]] == [r["object"] for r in rows[0]] == ["01_plate", "03_sphere"]
+    pd.testing.assert_frame_equal(_stable(pd.DataFrame(rows[1])), _stable(pd.DataFrame(rows[0])))
+    tables = {n: pd.read_csv(tmp_path / f"out{n}" / "results.csv") for n in (0, 1)}
+    assert list(tables[1].columns) == list(tables[0].columns)                       # the same column order
+    pd.testing.assert_frame_equal(_stable(tables[1]), _stable(tables[0]))
+    assert _files(tmp_path / "out1") == _files(tmp_path / "out0")                   # depth PNGs, JSON, previews
+    arrays = {n: _arrays(tmp_path / f"out{n}" / "arrays.h5") for n in (0, 1)}
+    assert arrays[1].keys() == arrays[0].keys() and len(arrays[0]) == 6
+    for name, values in arrays[0].items():
+        np.testing.assert_array_equal(arrays[1][name], values)
+    if with_store:                   # the cells a worker wrote serve the next run as the main thread's do
+        cells = {n: sorted((stores[n] / "cells").glob("*.json")) for n in (0, 1)}
+        assert len(cells[1]) == len(cells[0]) == 2
+        for a, b in zip(cells[0], cells[1], strict=True):
+            assert _stable(pd.DataFrame([json.loads(b.read_text())])).equals(
+                _stable(pd.DataFrame([json.loads(a.read_text())])))
+        again = _run(root, tmp_path / "again", stores[1], 1)
+        assert all(r["cached"] for r in again)
+    # the workers share the host with the timed calls: never a runtime measured alone
+    assert {r["timing"] for r in rows[1]} == {"parallel"} and {r["timing"] for r in rows[0]} <= {"alone", "contended"}
+
+
+def test_pool_sizes():
+    assert workers.pool_size("auto", "cpu") == 0
+    assert 0 <= workers.pool_size("auto", "cuda") <= workers.MAX_AUTO_WORKERS
+    assert workers.pool_size("auto", "cuda", shared=True) == 0          # jobs side by side: their cores
+    assert workers.pool_size(3, "cpu") == 3
+
+
+def test_a_run_that_defers_its_files_is_complete_once_they_are_finished(root, tmp_path):
+    reference = _stable(pd.DataFrame(_run(root, tmp_path / "reference", None, 0)))
+    rows = _run(root, tmp_path / "deferred", None, 1, defer=True)
+    assert [r["object"] for r in rows] == ["01_plate", "03_sphere"]     # known when the run returns
+    finish_deferred()
+    pd.testing.assert_frame_equal(_stable(pd.DataFrame(rows)), reference)
+    pd.testing.assert_frame_equal(_stable(pd.read_csv(tmp_path / "deferred" / "results.csv")),
+                                  _stable(pd.read_csv(tmp_path / "reference" / "results.csv")))
+    first = _run(root, tmp_path / "first", None, 1, defer=True)
+    _run(root, tmp_path / "second", None, 0)          # a later run waits for the earlier one's files first
+    assert all("P_cm" in row for row in first) and len(pd.read_csv(tmp_path / "first" / "results.csv")) == 2
