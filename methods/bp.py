@@ -11,10 +11,11 @@ and pixels without a prior stay NaN.
 
 Region of interest and skips (methods.skips.roi, methods.skips.settings): with an ROI, only its pixels and depths are
 evaluated (the rest NaN); the depth search can run coarse-to-fine with a filter-aware pixel skip (on every device,
-through the point kernels; on the host with local-maximum candidates and a 2 mm pixel lattice) and, on the CPU with
-many frequencies, on range-compressed profiles (methods.skips.bp_search, methods.backends.cpu_range); with many
-frequencies on CUDA the coarse ROI's pass and the whole search run on the device (`Backend.coarse_peaks`,
-`Backend.search_depth`: the host's rules without its two shortcuts, so its depths are those of the host search
+through the point kernels; on the host with local-maximum candidates, a 2 mm pixel lattice, the coarse ROI's pass
+in two passes and, with many frequencies, each pixel's coarse samples within the coarse ROI's local depths) and, on
+the CPU with many frequencies, on range-compressed profiles (methods.skips.bp_search, methods.backends.cpu_range);
+with many frequencies on CUDA the coarse ROI's pass and the whole search run on the device (`Backend.coarse_peaks`,
+`Backend.search_depth`: the host's rules without its shortcuts, so its depths are those of the host search
 with the shortcuts off, and within the skip rule of those with them on). With no ROI
 and no skip (`roi=none`) the computation is today's: the rectangular volume through `correlate_volume`.
 """
@@ -89,6 +90,15 @@ def _evaluator(signal, freqs_hz, antennas, backend: Backend, use_range, points_h
     return backend.summed_at_points(signal, freqs_hz, antennas.tx_m, antennas.rx_m)
 
 
+def _window_indices(z_window_m, pixels: np.ndarray, z_m: np.ndarray, pad_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The coarse ROI's depth bounds (low, high) (ny, nx) metres at `pixels`, widened by pad_m on each side, as
+    indices into the equidistant z_m."""
+    dz_m = float(z_m[1] - z_m[0])
+    low = np.ceil((z_window_m[0][pixels] - pad_m - z_m[0]) / dz_m - 1e-6)
+    high = np.floor((z_window_m[1][pixels] + pad_m - z_m[0]) / dz_m + 1e-6)
+    return np.clip(low, 0, len(z_m) - 1).astype(int), np.clip(high, 0, len(z_m) - 1).astype(int)
+
+
 def _box_corners_m(x_m, y_m, z_m) -> np.ndarray:
     """(8, 3) corners of the box spanned by the coordinate arrays."""
     return np.array([[x, y, z] for x in (np.min(x_m), np.max(x_m)) for y in (np.min(y_m), np.max(y_m))
@@ -128,7 +138,7 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                (len(z_m) > 0 and bool(np.isclose(z_m[-1], z_outer[-1], atol=1e-9))))
     use_range = skips.bp_range_cpu and backend.host_range_search and cpu_range.worth_it(freqs_hz)
     pixels = roi.pixels
-    n_evaluated, plan = 0, None
+    n_evaluated, plan, local_z = 0, None, None
     depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
     with timer.stage("correlate"):
         if pixels.any() and len(z_m):
@@ -144,8 +154,11 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                                                                        antennas.rx_m, x_m, y_m, z_c, step, hull_m)
                 found, n_coarse = bp_search.coarse_roi(evaluate, pixels, x_img, y_img, z_m, plan_of, threshold_db,
                                                        step_px, radius_px, skips.roi_keep_margin_db,
-                                                       skips.roi_margin_m, coarse_peaks)
+                                                       skips.roi_margin_m, coarse_peaks,
+                                                       None if skips.roi_prepass_margin_db < 0
+                                                       else skips.roi_prepass_margin_db)
                 n_evaluated += n_coarse
+                local_z = found.z_window_m
                 extra["coarse_roi_voxels"] = n_coarse
                 keep_z = (z_m >= found.z_min_m - 1e-9) & (z_m <= found.z_max_m + 1e-9)
                 # the depth edges the coarse ROI cut are ROI edges, not grid edges, from now on
@@ -166,6 +179,8 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                 extra["search_lattice_px"] = 1                      # every pixel evaluates its coarse depths
                 if found_depth is None:
                     options = _host_search_options(skips, grid, pixels)
+                    if skips.search_local_z and local_z is not None and len(z_m) > 1:
+                        options["z_window"] = _window_indices(local_z, pixels, z_m, skips.search_local_z_pad_m)
                     found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges,
                                                          **options)
                     if options.get("lattice"):

@@ -145,9 +145,11 @@ def search_rows(backend, antennas, n_xy: int, n_z: int, n_frames: int, rng) -> l
     import warp as wp
 
     grid = RadarGrid((-0.15, -0.15, 0.2), (0.15, 0.15, 0.4), (n_xy, n_xy, n_z))
-    # the device search has the rules without the host's two shortcuts (bp_search): compare like with like
+    # the device search has the rules without the host's shortcuts (bp_search: local maxima, pixel lattice, local
+    # depth windows; the coarse ROI's two passes): compare like with like
     skips = dataclasses.replace(skip_settings.default_for("bp", len(ALL_FREQS_HZ), backend.dense_beats_search),
-                                search_local_max=False, search_lattice_step_m=0.0)
+                                search_local_max=False, search_lattice_step_m=0.0, search_local_z=False,
+                                roi_prepass_margin_db=-1.0)
     frames = [scene_frame(antennas, ALL_FREQS_HZ, rng) for _ in range(n_frames + 1)]
     results: dict = {True: [], False: []}
     times: dict = {True: [], False: []}

@@ -54,6 +54,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from methods.domain.antennas import AntennaArray
 from methods.ops.correlate import C_M_PER_S
@@ -248,8 +249,9 @@ def _coarse_indices(n_z: int, step: int) -> np.ndarray:
 class _Samples:
     """|V| at (fine depth index, pixel), -1 where not evaluated; evaluates batches of (k, pixel) through `evaluate`."""
 
-    def __init__(self, evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray):
-        self.evaluate, self.x_m, self.y_m, self.z_m = evaluate, x_m, y_m, z_m
+    def __init__(self, evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray,
+                 window: tuple[np.ndarray, np.ndarray] | None = None):
+        self.evaluate, self.x_m, self.y_m, self.z_m, self.window = evaluate, x_m, y_m, z_m, window
         self.mag = np.full((len(z_m), len(x_m)), -1.0, dtype=np.float32)
         self.count = 0
 
@@ -261,8 +263,9 @@ class _Samples:
         self.count += len(k)
 
     def run_coarse(self, step: np.ndarray, pixels: np.ndarray | None = None) -> np.ndarray:
-        """Evaluate the coarse samples (each pixel's `step` (N,)) of `pixels` (indices; default all); returns the
-        coarse maximum per pixel (N,) (0 for the others)."""
+        """Evaluate the coarse samples (each pixel's `step` (N,)) of `pixels` (indices; default all) inside each
+        pixel's depth window where one is set (`window`: lowest and highest depth index (N,)); returns the coarse
+        maximum per pixel (N,) (0 for the others)."""
         n_z = len(self.z_m)
         pixels = np.arange(len(step)) if pixels is None else pixels
         coarse_max = np.zeros(len(step), dtype=np.float32)
@@ -270,8 +273,12 @@ class _Samples:
             pix = pixels[step[pixels] == s]
             k_c = _coarse_indices(n_z, int(s))
             pp, kk = np.meshgrid(pix, k_c, indexing="ij")     # pixel-major: a batch's points lie close together
-            self.run(kk.ravel(), pp.ravel())
-            coarse_max[pix] = self.mag[np.ix_(k_c, pix)].max(axis=0)
+            if self.window is None:
+                self.run(kk.ravel(), pp.ravel())
+            else:
+                inside = (kk >= self.window[0][pp]) & (kk <= self.window[1][pp])
+                self.run(kk[inside], pp[inside])
+            coarse_max[pix] = np.maximum(self.mag[np.ix_(k_c, pix)].max(axis=0), 0.0)
         return coarse_max
 
     def run_inherited(self, step: np.ndarray, window: np.ndarray, lattice: Lattice, local_max: bool) -> None:
@@ -300,9 +307,12 @@ class _Samples:
 
 def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray, plan: SearchPlan,
                  threshold_db: float | None, z_edges_are_grid_edges: tuple[bool, bool] = (True, True),
-                 lattice: Lattice | None = None, local_max: bool = False) -> SearchResult:
+                 lattice: Lattice | None = None, local_max: bool = False,
+                 z_window: tuple[np.ndarray, np.ndarray] | None = None) -> SearchResult:
     """Coarse-to-fine depth peak (module doc) of the pixels (x_m, y_m) (N,) over the equidistant depths z_m (n_z,);
-    `lattice` and `local_max`: the module doc's shortcuts (off: the search whose condition is proved there).
+    `lattice` and `local_max`: the module doc's shortcuts (off: the search whose condition is proved there);
+    `z_window`: each pixel's lowest and highest depth index (N,) for its own coarse samples (the coarse ROI's local
+    depth bounds, `Roi.z_window_m`); refinement and climb are not bounded by it.
 
     Refinement halves the spacing level by level (ceil(s / 2)): around each candidate c of a level of spacing s,
     c +- ceil(s / 2) are evaluated, and the candidates of the new level are the evaluated samples within its
@@ -314,7 +324,7 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     n_z, n_px = len(z_m), len(x_m)
     dz_m = float(z_m[1] - z_m[0]) if n_z > 1 else 1.0
     spacing = np.minimum(plan.step, max(n_z - 1, 1))
-    samples = _Samples(evaluate, x_m, y_m, z_m)
+    samples = _Samples(evaluate, x_m, y_m, z_m, z_window)
     window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)                     # (N,)
     if lattice is not None and lattice.step_px > 1:
         samples.run_inherited(spacing, window, lattice, local_max)
@@ -376,25 +386,54 @@ def _climb(samples: _Samples, active: np.ndarray) -> None:
         pixels = np.unique(p)
 
 
+def _coarse_two_pass(samples: _Samples, step: np.ndarray, pixels: np.ndarray, grid_lattice: np.ndarray,
+                     lattice_step_px: int, below_db: float) -> np.ndarray:
+    """The coarse ROI's samples on the lattice `grid_lattice` (ny, nx) bool (its pixels in `samples`' order) in two
+    passes: every coarse sample at the lattice pixels of every second lattice row and column first; then at the
+    other lattice pixels next to (within one lattice step in x and y of) a first-pass pixel whose coarse maximum
+    is within `below_db` of the first pass's maximum, or next to none. Returns the coarse maximum per lattice pixel
+    (0: not evaluated). Measured, not proved: an object whose lattice pixels all lie more than `below_db` below
+    the maximum at the first pass's pixels around them is not found (docs/measurements/formation.md)."""
+    rows, cols = np.nonzero(grid_lattice)                  # the lattice pixels' order in `samples`
+    start = lattice_step_px // 2
+    first = ((rows - start) % (2 * lattice_step_px) == 0) & ((cols - start) % (2 * lattice_step_px) == 0)
+    peak = samples.run_coarse(step, np.flatnonzero(first))
+    strong = first & (peak >= peak.max() * 10.0 ** (-below_db / 20.0)) & (peak > 0)
+    marked, seen = np.zeros_like(pixels), np.zeros_like(pixels)
+    marked[rows[strong], cols[strong]] = True
+    seen[rows[first], cols[first]] = True
+    # next to a strong first-pass pixel (within one lattice step in x and y), or to none at all (the set's edges)
+    near = (dilate(marked, lattice_step_px) | ~dilate(seen, lattice_step_px))[rows, cols] & ~first
+    if near.any():
+        peak = np.maximum(peak, samples.run_coarse(step, np.flatnonzero(near)))
+    return peak
+
+
 def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray,
                plan_of: Callable[[np.ndarray, np.ndarray], SearchPlan], threshold_db: float, lattice_step_px: int,
-               radius_px: int, keep_margin_db: float, margin_m: float, coarse_peaks: CoarsePeaks | None = None
-               ) -> tuple[Roi, int]:
+               radius_px: int, keep_margin_db: float, margin_m: float, coarse_peaks: CoarsePeaks | None = None,
+               prepass_margin_db: float | None = None) -> tuple[Roi, int]:
     """The object's ROI from a coarse pass: depth samples at twice the search plan's coarse step (`plan_of(x, y)`)
     at the lattice pixels (every `lattice_step_px`-th) of `pixels` (ny, nx) bool; x_m, y_m (ny, nx) pixel centres;
     z_m the depths inside the current ROI.
 
     Lattice pixels whose coarse maximum is within threshold + keep_margin_db of the lattice maximum mark the pixels
     within `radius_px` in x and y; the depth range is their coarse peaks +- (that coarse step + margin_m). The
-    doubled step loses at most a few dB at a peak, inside keep_margin_db. Returns (the ROI within `pixels` and
-    z_m's range, samples evaluated)."""
+    doubled step loses at most a few dB at a peak, inside keep_margin_db. With `prepass_margin_db` (host pass
+    only) the lattice is first evaluated at every second lattice pixel in x and y, and the others only next to a
+    pre-pass pixel within threshold + keep_margin_db + prepass_margin_db of the pre-pass
+    maximum (`_coarse_two_pass`). Returns (the ROI within `pixels` and z_m's range, samples evaluated)."""
     grid_lattice = lattice(pixels, lattice_step_px)
     x_l, y_l = x_m[grid_lattice], y_m[grid_lattice]
     step = np.minimum(2 * plan_of(x_l, y_l).step, max(len(z_m) - 1, 1))
     found = coarse_peaks(x_l, y_l, z_m, step) if coarse_peaks is not None else None
     if found is None:
         samples = _Samples(evaluate, x_l, y_l, z_m)
-        peak = samples.run_coarse(step)
+        if prepass_margin_db is None:
+            peak = samples.run_coarse(step)
+        else:
+            peak = _coarse_two_pass(samples, step, pixels, grid_lattice, lattice_step_px,
+                                    threshold_db + keep_margin_db + prepass_margin_db)
         found = peak, np.argmax(samples.mag, axis=0), samples.count   # unevaluated hold -1: never the argmax
     peak, peak_k, n_evaluated = found
     peak_z = z_m[peak_k]
@@ -404,5 +443,13 @@ def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.
     roi_pixels = dilate(marked, radius_px) & pixels
     dz_m = z_m[1] - z_m[0] if len(z_m) > 1 else 0.0
     pad_m = step[strong] * dz_m + margin_m
+    # each ROI pixel's own depth bounds: those of the strong lattice pixels that marked it
+    low, high = np.full(pixels.shape, np.inf), np.full(pixels.shape, -np.inf)
+    rows, cols = np.nonzero(grid_lattice)
+    low[rows[strong], cols[strong]] = peak_z[strong] - pad_m
+    high[rows[strong], cols[strong]] = peak_z[strong] + pad_m
+    size = 2 * radius_px + 1
+    window = (ndimage.minimum_filter(low, size=size, mode="constant", cval=np.inf),
+              ndimage.maximum_filter(high, size=size, mode="constant", cval=-np.inf))
     return (Roi(roi_pixels, float(np.min(peak_z[strong] - pad_m)), float(np.max(peak_z[strong] + pad_m)),
-                ("coarse",)), n_evaluated)
+                ("coarse",), window), n_evaluated)

@@ -25,12 +25,14 @@ from methods.domain.capture import RadarGrid
 @dataclass(frozen=True)
 class Roi:
     """`pixels` (ny, nx) bool on the compute grid (row 0 = +y); depths [z_min_m, z_max_m] (inclusive, metres);
-    `sources`: what bounded it, e.g. ("mask_bb", "coarse")."""
+    `sources`: what bounded it, e.g. ("mask_bb", "coarse"); `z_window_m`: where a source knows more, each pixel's
+    own depth bounds (low, high), metres, inside [z_min_m, z_max_m] (BP's search may start from them)."""
 
     pixels: np.ndarray
     z_min_m: float
     z_max_m: float
     sources: tuple[str, ...] = ()
+    z_window_m: tuple[np.ndarray, np.ndarray] | None = None   # per pixel (ny, nx) depth bounds (BP's coarse ROI)
 
     @property
     def n_pixels(self) -> int:

@@ -14,12 +14,16 @@ numbers).
   the plate); an object in front of the box holds the image maximum the filter is relative to; and a depth
   dropped at the box's edge changes the metrics' triangulation of its in-box neighbours (docs/measurements/skips.md).
 * `coarse_roi`: BP without a sensor prior evaluates only the object's pixels and depth range, bounded by a coarse
-  pass on a pixel lattice (methods.skips.bp_search.coarse_roi) with the margins below.
+  pass on a pixel lattice (methods.skips.bp_search.coarse_roi) with the margins below. Where that pass runs on the
+  host it first evaluates every second lattice pixel in x and y and then only the lattice pixels next to those
+  within threshold + `roi_keep_margin_db` + `roi_prepass_margin_db` of the first pass's maximum (< 0: off).
 * `bp_coarse_to_fine`: BP searches each pixel's depth on a coarse step first and refines around the candidates;
   pixels whose coarse maximum proves them below the filter are not refined (methods.skips.bp_search). Where the
   search runs on the host, its two measured shortcuts (bp_search's module doc): candidates only at local maxima
   (`search_local_max`) and the coarse samples of every pixel only on a `search_lattice_step_m` pixel lattice, the
-  other pixels' near their lattice corners' candidates (0: off).
+  other pixels' near their lattice corners' candidates (0: off); with `search_local_z` (and the coarse ROI) each
+  pixel's coarse samples only within the depths of the coarse ROI's lattice pixels that marked it (their peaks +-
+  the ROI's depth pad, + `search_local_z_pad_m`), not the ROI's whole depth range.
 * `bp_range_cpu`: BP with many frequencies on the CPU gathers from range-compressed profiles
 (methods.backends.cpu_range)
   instead of summing every frequency.
@@ -61,12 +65,16 @@ class SkipSettings:
     roi_lattice_step_m: float = 0.004  # coarse_roi's lattice (BP): a pixel every 4 mm (1/16 of 1 mm pixels) ...
     roi_keep_margin_db: float = 6.0   # ... marking its neighbourhood when within threshold + 6 dB of the max
     roi_margin_m: float = 0.01        # the coarse ROI's depth range: lattice peaks +- (lattice depth step + 1 cm)
+    roi_prepass_margin_db: float = 3.0  # >= 0: the host's coarse ROI pass on every 2nd lattice pixel first, the
+    #                                   others next to those within threshold + roi_keep_margin_db + this (< 0: off)
     psf_max_loss_db: float = 3.0      # coarse depth step: largest with <= 3 dB point-target loss at half a step
     max_coarse_step_m: float = 0.01   # ... and at most 1 cm
     candidate_margin_db: float = 1.0  # refine coarse samples within (that loss + 1 dB) of the pixel's coarse max
     search_local_max: bool = True     # ... that are local maxima among the pixel's evaluated samples (host search)
     search_lattice_step_m: float = 0.002  # coarse samples at every pixel of a 2 mm lattice only (host search) ...
     search_lattice_margin_db: float = 1.0  # ... the others' near their corners' candidates within the window + 1 dB
+    search_local_z: bool = False      # each pixel's coarse samples only within the coarse ROI's depths near it (host)
+    search_local_z_pad_m: float = 0.0  # ... widened by this on each side
     dense_z_step_m: float = 0.006     # bp_dense_z_search's coarse depth step (window: +- one step at the grid's step)
     dense_z_candidates: int = 3       # ... around the pixel's 3 largest coarse local maxima, refined where its coarse
     dense_z_margin_db: float = 6.0    # maximum is within threshold + 6 dB of the image's (a point target loses <= 2.6
@@ -90,6 +98,7 @@ class SkipSettings:
         return dataclasses.replace(self, **{n: n == name for n in SKIP_NAMES})
 
 
+LOCAL_Z_MIN_FREQS = 16           # BP's host search uses the coarse ROI's local depth windows from this many on
 NONE = SkipSettings()
 ALL = SkipSettings(**dict.fromkeys(SKIP_NAMES, True))
 PRESETS = ("none", "auto", "all")
@@ -120,7 +129,9 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False, kee
     if method == "bp":
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True, bp_dense_z_search=n_freqs == 2)
-        return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True)
+        # local depth windows where the profiles are sharp (many frequencies; measured on BP_max: formation.md 8)
+        return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True,
+                            search_local_z=n_freqs >= LOCAL_Z_MIN_FREQS)
     if dense_beats_search:
         return SkipSettings(mask_bb=True, fsk_keep=keeps_on_device)
     return SkipSettings(mask_bb=True, fsk_keep=True)

@@ -116,6 +116,8 @@ def test_roi_settings():
     assert resolve("auto", "bp", 3, True) == SkipSettings(mask_bb=True) == default_for("2fsk", 2, True)
     assert resolve("auto", "bp", 2, True) == SkipSettings(mask_bb=True, bp_dense_z_search=True)
     assert default_for("bp", 128, True).bp_coarse_to_fine and default_for("2fsk", 2, False).fsk_keep
+    # the host search's local depth windows with many frequencies only (sharp profiles; formation.md section 8)
+    assert default_for("bp", 128).search_local_z and not default_for("bp", 2).search_local_z
     # ... but where the backend keeps inside its device graph (Warp on CUDA), fsk_keep pays there too
     assert resolve("auto", "3fsk", 3, True, True) == SkipSettings(mask_bb=True, fsk_keep=True)
     assert resolve("auto", "bp", 2, True, True) == SkipSettings(mask_bb=True, bp_dense_z_search=True)
@@ -287,6 +289,77 @@ def test_pixel_lattice_inherits_the_peaks_of_laterally_smooth_profiles(record_pr
     assert fast.n_evaluated < 0.8 * full.n_evaluated
     corners, own = lattice.corners()
     assert own.sum() == 12 * 12 + 2 * 24 - 1 and (corners[~own] >= 0).all()   # lattice + last row and column
+
+
+def _blob_scene(rng, n_side: int = 61, pitch_m: float = 0.001):
+    """An object on an n_side x n_side pixel image: a Gaussian blob of reflectivity (sigma 6 mm) at a random place
+    whose depth tilts steeply across it, depth profiles Gaussian (w = 4 mm), plus a -40 dB random floor at every
+    pixel and depth. Returns (evaluate, x (ny, nx), y (ny, nx), z_m, plan_of)."""
+    axis = (np.arange(n_side) - n_side // 2) * pitch_m
+    yy, xx = np.meshgrid(axis[::-1], axis, indexing="ij")
+    x0, y0 = rng.uniform(-0.01, 0.01, 2)
+    tilt = rng.uniform(0.6, 1.0, 2) * rng.choice([-1, 1], 2)               # the depth moves ~3 cm across the ROI
+    z_m = np.arange(0.22, 0.42 + 1e-9, 0.001)
+    floor = rng.uniform(0, 0.01, (n_side * n_side, len(z_m)))
+
+    def evaluate(points_m):
+        x, y, z = points_m.T
+        amp = np.exp(-((x - x0) ** 2 + (y - y0) ** 2) / (2 * 0.006 ** 2))
+        centre = 0.31 + tilt[0] * (x - x0) + tilt[1] * (y - y0)
+        col = np.rint(x / pitch_m).astype(int) + n_side // 2
+        row = n_side // 2 - np.rint(y / pitch_m).astype(int)
+        k = np.rint((z - z_m[0]) / 0.001).astype(int)
+        return amp * np.exp(-((z - centre) ** 2) / (2 * 0.004 ** 2)) + floor[row * n_side + col, k]
+
+    curve = 20 * np.log10(np.e) * (np.arange(1, 9) * 0.001 / 2) ** 2 / (2 * 0.004 ** 2)
+    return evaluate, xx, yy, z_m, lambda x, y: SearchPlan.uniform(len(x), 4, curve, margin_db=1.0)
+
+
+def test_coarse_roi_in_two_passes_finds_the_same_roi_with_fewer_samples(record_property):
+    # the host's coarse ROI pass first on every 2nd lattice pixel, then only next to those within the margin: the
+    # same ROI (pixels, depths, local depth bounds) on a blob over a floor, with fewer samples; with a margin that
+    # keeps every first-pass pixel, every lattice pixel is evaluated (the samples of the one-pass ROI)
+    rng = fresh_rng(record_property)
+    evaluate, xx, yy, z_m, plan_of = _blob_scene(rng)
+    pixels = np.ones(xx.shape, dtype=bool)
+    one, n_one = bp_search.coarse_roi(evaluate, pixels, xx, yy, z_m, plan_of, 14.0, 4, 6, 6.0, 0.01)
+    two, n_two = bp_search.coarse_roi(evaluate, pixels, xx, yy, z_m, plan_of, 14.0, 4, 6, 6.0, 0.01,
+                                      prepass_margin_db=3.0)
+    _, n_all = bp_search.coarse_roi(evaluate, pixels, xx, yy, z_m, plan_of, 14.0, 4, 6, 6.0, 0.01,
+                                    prepass_margin_db=200.0)
+    same(two.pixels, one.pixels)
+    assert (two.z_min_m, two.z_max_m) == (one.z_min_m, one.z_max_m)
+    same(two.z_window_m[0], one.z_window_m[0])
+    same(two.z_window_m[1], one.z_window_m[1])
+    assert n_two < 0.7 * n_one and n_all == n_one
+    assert 0 < one.pixels.sum() < 0.5 * pixels.size                          # the blob, not the floor
+
+
+def test_local_depth_windows_hold_the_peaks_and_bound_the_coarse_samples(record_property):
+    # the coarse ROI's per-pixel depth bounds: every ROI pixel's window lies inside the ROI's depths; the search's
+    # coarse samples only inside them find the same depths as over all depths, with fewer samples; a window that
+    # excludes a pixel's peak lobe makes it miss (the windows are applied)
+    rng = fresh_rng(record_property)
+    evaluate, xx, yy, z_m, plan_of = _blob_scene(rng)
+    roi, _ = bp_search.coarse_roi(evaluate, np.ones(xx.shape, dtype=bool), xx, yy, z_m, plan_of, 14.0, 4, 6, 6.0,
+                                  0.01)
+    low, high = (w[roi.pixels] for w in roi.z_window_m)
+    assert (low >= roi.z_min_m - 1e-12).all() and (high <= roi.z_max_m + 1e-12).all() and (high > low).all()
+    z_in = z_m[roi.z_indices(z_m)]
+    x, y = xx[roi.pixels], yy[roi.pixels]
+    window = (np.ceil((low - z_in[0]) / 0.001 - 1e-6).astype(int),
+              np.floor((high - z_in[0]) / 0.001 + 1e-6).astype(int))
+    plan = plan_of(x, y)
+    full = search_depth(evaluate, x, y, z_in, plan, 14.0)
+    local = search_depth(evaluate, x, y, z_in, plan, 14.0, z_window=window)
+    full_m, local_m = (filter_depth(r.depth_m, r.max_projection, 14.0) for r in (full, local))
+    same(np.isfinite(full_m), np.isfinite(local_m))
+    np.testing.assert_array_equal(local_m, full_m)
+    assert local.n_evaluated < full.n_evaluated
+    off = (np.zeros(len(x), dtype=int), np.full(len(x), 10))             # the first 10 mm only: far from the blob
+    missed = search_depth(evaluate, x, y, z_in, plan, None, z_window=off)
+    kept = np.isfinite(full_m)
+    assert np.mean(np.abs(missed.depth_m[kept] - full_m[kept]) > 0.005) > 0.5
 
 
 # ---- physics with every skip on ---------------------------------------------------------------------------------
