@@ -285,7 +285,7 @@ def test_skipped_sideways_samples_change_the_frame_by_less_than_1e4():
     full = simulate_frame(points, samples.areas_m2, antennas.tx_m, antennas.rx_m, freqs, normals,
                           np.repeat(lobe, len(points)))
     config = dataclasses.replace(SynthConfig(), scattering="specular")
-    skipped = radar_scene._simulate(samples, samples.areas_m2, points, lobe, config, antennas, freqs)
+    skipped = radar_scene._simulate(samples, samples.areas_m2, points, lobe, config, antennas, freqs, "cpu")
     assert np.abs(skipped - full).max() < 1e-4 * np.abs(full).max()
 
 
