@@ -62,8 +62,8 @@ def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]
 # Seconds per capture on two quiet cores (docs/measurements/performance.md, 2026-11-26: generator v9, BP's host
 # search with its shortcuts), for the estimate the demo prints before it starts; re-measure when they move.
 GENERATE_S_PER_CAPTURE = 2.6
-SWEEP_S_PER_CAPTURE = {"table2": 2.6, "table3": 26.0}
-BP_MAX_S_PER_CAPTURE = 9.9           # table3's longest cell
+SWEEP_S_PER_CAPTURE = {"table2": 1.9, "table3": 18.4}
+BP_MAX_S_PER_CAPTURE = 6.7           # table3's longest cell
 
 
 def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
