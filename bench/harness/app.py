@@ -374,7 +374,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                                           shared=timing == "parallel"))
     if pool is not None:
         timing = "parallel"              # the workers share the host with the timed calls (bench.harness.workers)
-    rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _job_log()
+    rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _JobLog()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
     label = f"{method.label} {cfg.freq.name}{f' {params}' if params else ''}"
@@ -415,7 +415,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
             writer.close()
         raise
     if defer_outputs:
-        outputs.defer(writer, out_dir)
+        outputs.defer(writer, out_dir, job_log.close)
     else:
         with stages.stage("outputs"):
             writer.close()
@@ -461,18 +461,29 @@ def _finish(result, rows: list[dict], index: int, out_dir: Path, grid: RadarGrid
                 row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
 
 
-def _job_log():
+class _JobLog:
     """`log.info` into the handlers logging has now (the job's, which Hydra replaces when the next job starts): for
-    lines the writer thread logs after its job returned (`defer_outputs`)."""
-    handlers = [*log.handlers, *(logging.getLogger().handlers if log.propagate else ())]
+    lines the writer thread logs after its job returned (`defer_outputs`). `close` closes the job's files again once
+    its writer is done: a FileHandler that Hydra closed reopens its file on the next line and would keep it open."""
 
-    def info(message: str, *args) -> None:
+    def __init__(self):
+        self.handlers = [*log.handlers, *(logging.getLogger().handlers if log.propagate else ())]
+
+    def __call__(self, message: str, *args) -> None:
         if log.isEnabledFor(logging.INFO):
             record = log.makeRecord(log.name, logging.INFO, __file__, 0, message, args, None)
-            for handler in handlers:
+            for handler in self.handlers:
                 if record.levelno >= handler.level:
                     handler.handle(record)
-    return info
+
+    def close(self) -> None:
+        for handler in self.handlers:
+            if isinstance(handler, logging.FileHandler) and handler not in _live_handlers():
+                handler.close()
+
+
+def _live_handlers() -> list[logging.Handler]:
+    return [*log.handlers, *logging.getLogger().handlers]
 
 
 def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_filtered: bool, antenna_files,

@@ -4,6 +4,7 @@ from __future__ import annotations
 import functools
 import io
 import json
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -125,25 +126,27 @@ class ResultsCsv:
                             .encode())
 
 
-_DEFERRED: list[tuple[BackgroundWriter, Path]] = []
+_DEFERRED: list[tuple[BackgroundWriter, Path, Callable[[], None]]] = []
 
 
-def defer(writer: BackgroundWriter, out_dir: Path) -> None:
+def defer(writer: BackgroundWriter, out_dir: Path, then: Callable[[], None]) -> None:
     """Let `writer` (the outputs of the run in `out_dir`) finish while the process goes on (the next job of a
-    basic launcher's sweep); `finish_deferred` waits for it."""
-    _DEFERRED.append((writer, out_dir))
+    basic launcher's sweep); `finish_deferred` waits for it, then calls `then` (the run's clean-up)."""
+    _DEFERRED.append((writer, out_dir, then))
 
 
 def finish_deferred() -> None:
     """Wait for the deferred writers; the first error is raised here, noted with the run whose outputs failed (the
     caller is the next job, or the end of the sweep)."""
     while _DEFERRED:
-        writer, out_dir = _DEFERRED.pop(0)
+        writer, out_dir, then = _DEFERRED.pop(0)
         try:
             writer.close()
         except Exception as err:
             err.add_note(f"while writing the outputs of the run in {out_dir}")
             raise
+        finally:
+            then()
 
 
 class BackgroundWriter:

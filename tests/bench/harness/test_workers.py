@@ -134,3 +134,27 @@ def test_a_later_run_computes_only_after_the_files_an_earlier_run_deferred(root,
         finish()
     assert computed_after_gate == [True, True]
     assert all("P_cm" in row for row in first) and len(pd.read_csv(tmp_path / "first" / "results.csv")) == 2
+
+
+def test_a_deferred_run_logs_into_its_own_file_and_leaves_it_closed(root, tmp_path):
+    """The writer's lines after the run returned go to the run's log file, which Hydra has closed by then (the next
+    job's logging replaces it); once the writer is done the file is closed again, not left open by the reopening."""
+    import logging
+
+    from bench.harness import app
+
+    handler = logging.FileHandler(tmp_path / "app.log")
+    handler.setLevel(logging.INFO)
+    level = app.log.level
+    app.log.addHandler(handler)
+    app.log.setLevel(logging.INFO)
+    try:
+        _run(root, tmp_path / "deferred", None, 1, defer=True)
+        app.log.removeHandler(handler)
+        handler.close()                                    # as Hydra's next job configures logging
+        finish_deferred()
+    finally:
+        app.log.removeHandler(handler)
+        app.log.setLevel(level)
+    assert handler.stream is None                          # closed again after the writer's reopening lines
+    assert (tmp_path / "app.log").read_text().count(": computed,") == 2
