@@ -270,13 +270,16 @@ def test_local_max_candidates_find_the_same_peaks_with_fewer_samples(record_prop
 
 def test_pixel_lattice_inherits_the_peaks_of_laterally_smooth_profiles(record_property):
     # 24 x 24 pixels whose profiles (two Gaussian lobes) move slowly across the image: the pixels between lattice
-    # pixels evaluate only the coarse samples near their corners' candidates and find the same peaks
+    # pixels evaluate only the coarse samples near their corners' candidates and find the same peaks. The second
+    # lobe stays >= 1.4 dB below the first (<= 0.8 + 0.046): lobes nearer a tie than the lattice's 1 dB margin, moving
+    # ~1 mm a pixel, can swap between a pixel and its corners (seen on 5 % of draws up to 0.95: a measured skip, whose
+    # rule on radar scenes is formation.md's)
     rng = fresh_rng(record_property)
     n_side, width_m, dz_m, step = 24, 0.004, 0.001, 7
     rows, cols = np.divmod(np.arange(n_side * n_side), n_side)
     tilt = rng.uniform(-0.001, 0.001, 2)
     centres = np.stack([0.28 + tilt[0] * rows + tilt[1] * cols, 0.32 - tilt[1] * rows + tilt[0] * cols], axis=1)
-    amplitudes = np.stack([np.full(len(rows), 1.0), rng.uniform(0.3, 0.95) + 0.002 * rows], axis=1)
+    amplitudes = np.stack([np.full(len(rows), 1.0), rng.uniform(0.3, 0.8) + 0.002 * rows], axis=1)
     evaluate = _gaussian_profiles(centres, amplitudes, width_m)
     z_m = np.arange(0.25, 0.35 + 1e-9, dz_m)
     loss_db = 20 * np.log10(np.e) * (np.arange(1, step + 1) * dz_m / 2) ** 2 / (2 * width_m ** 2)
