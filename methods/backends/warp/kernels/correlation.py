@@ -294,7 +294,8 @@ TC3_UNSCALE = wp.constant(1.0 / 2048.0)
 
 @wp.func
 def cos_lo(e: wp.float32, k: wp.float32) -> wp.float16:
-    """(cos - fp16(cos)) * TC3_SCALE in fp16: cos_half + cos_lo / TC3_SCALE is cos to ~2^-22."""
+    """(cos - fp16(cos)) * TC3_SCALE in fp16: cos_half + cos_lo / TC3_SCALE is the fp32 cosine to ~2^-22 (the
+    kernel's fast_math cosine itself is good to ~2^-21: the measured 4e-6 against float64 includes both)."""
     c = wp.cos(reduced_phase(e, k))
     return wp.float16((c - wp.float32(wp.float16(c))) * TC3_SCALE)
 
