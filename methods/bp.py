@@ -138,7 +138,7 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                (len(z_m) > 0 and bool(np.isclose(z_m[-1], z_outer[-1], atol=1e-9))))
     use_range = skips.bp_range_cpu and backend.host_range_search and cpu_range.worth_it(freqs_hz)
     pixels = roi.pixels
-    n_evaluated, plan, local_z = 0, None, None
+    n_evaluated, plan, local_z, evaluated = 0, None, None, None
     depth_m, max_proj = np.full(grid.image_shape, np.nan), np.full(grid.image_shape, np.nan)
     with timer.stage("correlate"):
         if pixels.any() and len(z_m):
@@ -158,7 +158,7 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                                                        None if skips.roi_prepass_margin_db < 0
                                                        else skips.roi_prepass_margin_db)
                 n_evaluated += n_coarse
-                local_z = found.z_window_m
+                local_z, evaluated = found.z_window_m, found.evaluated
                 extra["coarse_roi_voxels"] = n_coarse
                 keep_z = (z_m >= found.z_min_m - 1e-9) & (z_m <= found.z_max_m + 1e-9)
                 # the depth edges the coarse ROI cut are ROI edges, not grid edges, from now on
@@ -181,6 +181,8 @@ def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi:
                     options = _host_search_options(skips, grid, pixels)
                     if skips.search_local_z and local_z is not None and len(z_m) > 1:
                         options["z_window"] = _window_indices(local_z, pixels, z_m, skips.search_local_z_pad_m)
+                    if evaluated is not None:           # the coarse ROI's values at its lattice pixels
+                        options["known"] = evaluated.for_search(*np.nonzero(pixels), z_m)
                     found_depth = bp_search.search_depth(evaluate, x_px, y_px, z_m, plan, threshold_db, z_edges,
                                                          **options)
                     if options.get("lattice"):

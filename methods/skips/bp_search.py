@@ -94,6 +94,48 @@ class SearchPlan:
         return SearchPlan(np.full(n_px, step), np.broadcast_to(curve, (n_px, len(curve))), margin_db)
 
 
+@dataclass(frozen=True)
+class Evaluated:
+    """|V| a coarse pass evaluated, for the search to reuse: at the grid pixels (rows, cols) (L,) and the depths
+    z_m (n_z,), `mag` (n_z, L) float32, -1 where not evaluated."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    z_m: np.ndarray
+    mag: np.ndarray
+
+    def for_search(self, rows: np.ndarray, cols: np.ndarray, z_m: np.ndarray) -> Known | None:
+        """These values where the search of the grid pixels (rows, cols) (N,) over the depths z_m (equidistant, a
+        contiguous run of this pass's depths) would evaluate them; None where the depths do not line up."""
+        if len(z_m) == 0 or len(self.z_m) == 0:
+            return None
+        shift = int(np.argmin(np.abs(self.z_m - z_m[0])))
+        overlap = min(len(z_m), len(self.z_m) - shift)
+        if not np.array_equal(self.z_m[shift:shift + overlap], z_m[:overlap]):
+            return None
+        index = np.full((int(max(rows.max(initial=0), self.rows.max(initial=0))) + 1,
+                         int(max(cols.max(initial=0), self.cols.max(initial=0))) + 1), -1, dtype=np.int64)
+        index[self.rows, self.cols] = np.arange(len(self.rows))
+        return Known(index[rows, cols], self.mag[shift:shift + overlap])
+
+
+@dataclass(frozen=True)
+class Known:
+    """|V| known before the search: per searched pixel (N,) its column of `mag` (-1: none) and `mag` (n_k, L)
+    float32 at the search's first n_k depth indices (-1: not known)."""
+
+    slot: np.ndarray
+    mag: np.ndarray
+
+    def take(self, k: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """The known |V| at (depth index, pixel) (n,), -1 where not known."""
+        slot = self.slot[p]
+        hit = (slot >= 0) & (k < len(self.mag))
+        out = np.full(len(k), -1.0, dtype=np.float32)
+        out[hit] = self.mag[k[hit], slot[hit]]
+        return out
+
+
 @dataclass
 class SearchResult:
     """Per searched pixel: depth (NaN = filtered out by the skip, or peak on an ROI depth edge that is not a grid
@@ -250,12 +292,19 @@ class _Samples:
     """|V| at (fine depth index, pixel), -1 where not evaluated; evaluates batches of (k, pixel) through `evaluate`."""
 
     def __init__(self, evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray,
-                 window: tuple[np.ndarray, np.ndarray] | None = None):
-        self.evaluate, self.x_m, self.y_m, self.z_m, self.window = evaluate, x_m, y_m, z_m, window
+                 window: tuple[np.ndarray, np.ndarray] | None = None, known: Known | None = None):
+        self.evaluate, self.x_m, self.y_m, self.z_m, self.window, self.known = evaluate, x_m, y_m, z_m, window, known
         self.mag = np.full((len(z_m), len(x_m)), -1.0, dtype=np.float32)
         self.count = 0
 
     def run(self, k: np.ndarray, p: np.ndarray) -> None:
+        """|V| at (depth index, pixel) (n,): taken from `known` where it holds them, else evaluated (and counted)."""
+        if self.known is not None and len(k):
+            value = self.known.take(k, p)
+            hit = value >= 0
+            if hit.any():
+                self.mag[k[hit], p[hit]] = value[hit]
+                k, p = k[~hit], p[~hit]
         for start in range(0, len(k), BATCH_POINTS):      # bounded memory: correlate holds (F, batch) phasors
             kb, pb = k[start:start + BATCH_POINTS], p[start:start + BATCH_POINTS]
             points_m = np.column_stack([self.x_m[pb], self.y_m[pb], self.z_m[kb]])
@@ -308,11 +357,13 @@ class _Samples:
 def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray, plan: SearchPlan,
                  threshold_db: float | None, z_edges_are_grid_edges: tuple[bool, bool] = (True, True),
                  lattice: Lattice | None = None, local_max: bool = False,
-                 z_window: tuple[np.ndarray, np.ndarray] | None = None) -> SearchResult:
+                 z_window: tuple[np.ndarray, np.ndarray] | None = None, known: Known | None = None) -> SearchResult:
     """Coarse-to-fine depth peak (module doc) of the pixels (x_m, y_m) (N,) over the equidistant depths z_m (n_z,);
     `lattice` and `local_max`: the module doc's shortcuts (off: the search whose condition is proved there);
     `z_window`: each pixel's lowest and highest depth index (N,) for its own coarse samples (the coarse ROI's local
-    depth bounds, `Roi.z_window_m`); refinement and climb are not bounded by it.
+    depth bounds, `Roi.z_window_m`); refinement and climb are not bounded by it. `known`: values the coarse ROI's
+    pass evaluated (`Evaluated.for_search`), taken instead of evaluating them again where the search needs them (the
+    same samples and values, fewer evaluations).
 
     Refinement halves the spacing level by level (ceil(s / 2)): around each candidate c of a level of spacing s,
     c +- ceil(s / 2) are evaluated, and the candidates of the new level are the evaluated samples within its
@@ -324,7 +375,7 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     n_z, n_px = len(z_m), len(x_m)
     dz_m = float(z_m[1] - z_m[0]) if n_z > 1 else 1.0
     spacing = np.minimum(plan.step, max(n_z - 1, 1))
-    samples = _Samples(evaluate, x_m, y_m, z_m, z_window)
+    samples = _Samples(evaluate, x_m, y_m, z_m, z_window, known)
     window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)                     # (N,)
     if lattice is not None and lattice.step_px > 1:
         samples.run_inherited(spacing, window, lattice, local_max)
@@ -422,11 +473,13 @@ def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.
     doubled step loses at most a few dB at a peak, inside keep_margin_db. With `prepass_margin_db` (host pass
     only) the lattice is first evaluated at every second lattice pixel in x and y, and the others only next to a
     pre-pass pixel within threshold + keep_margin_db + prepass_margin_db of the pre-pass
-    maximum (`_coarse_two_pass`). Returns (the ROI within `pixels` and z_m's range, samples evaluated)."""
+    maximum (`_coarse_two_pass`). Returns (the ROI within `pixels` and z_m's range, samples evaluated); a host
+    pass leaves its values in the ROI's `evaluated` (`Evaluated`) for the search."""
     grid_lattice = lattice(pixels, lattice_step_px)
     x_l, y_l = x_m[grid_lattice], y_m[grid_lattice]
     step = np.minimum(2 * plan_of(x_l, y_l).step, max(len(z_m) - 1, 1))
     found = coarse_peaks(x_l, y_l, z_m, step) if coarse_peaks is not None else None
+    evaluated = None
     if found is None:
         samples = _Samples(evaluate, x_l, y_l, z_m)
         if prepass_margin_db is None:
@@ -435,6 +488,7 @@ def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.
             peak = _coarse_two_pass(samples, step, pixels, grid_lattice, lattice_step_px,
                                     threshold_db + keep_margin_db + prepass_margin_db)
         found = peak, np.argmax(samples.mag, axis=0), samples.count   # unevaluated hold -1: never the argmax
+        evaluated = Evaluated(*np.nonzero(grid_lattice), z_m, samples.mag)
     peak, peak_k, n_evaluated = found
     peak_z = z_m[peak_k]
     strong = peak >= peak.max() * 10.0 ** (-(threshold_db + keep_margin_db) / 20.0)
@@ -452,4 +506,4 @@ def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.
     window = (ndimage.minimum_filter(low, size=size, mode="constant", cval=np.inf),
               ndimage.maximum_filter(high, size=size, mode="constant", cval=-np.inf))
     return (Roi(roi_pixels, float(np.min(peak_z[strong] - pad_m)), float(np.max(peak_z[strong] + pad_m)),
-                ("coarse",), window), n_evaluated)
+                ("coarse",), window, evaluated), n_evaluated)

@@ -26,13 +26,15 @@ from methods.domain.capture import RadarGrid
 class Roi:
     """`pixels` (ny, nx) bool on the compute grid (row 0 = +y); depths [z_min_m, z_max_m] (inclusive, metres);
     `sources`: what bounded it, e.g. ("mask_bb", "coarse"); `z_window_m`: where a source knows more, each pixel's
-    own depth bounds (low, high), metres, inside [z_min_m, z_max_m] (BP's search may start from them)."""
+    own depth bounds (low, high), metres, inside [z_min_m, z_max_m] (BP's search may start from them);
+    `evaluated`: |V| a coarse pass evaluated on the way (BP's search takes them instead of evaluating them again)."""
 
     pixels: np.ndarray
     z_min_m: float
     z_max_m: float
     sources: tuple[str, ...] = ()
     z_window_m: tuple[np.ndarray, np.ndarray] | None = None   # per pixel (ny, nx) depth bounds (BP's coarse ROI)
+    evaluated: object | None = None   # the values BP's coarse pass evaluated (methods.skips.bp_search.Evaluated)
 
     @property
     def n_pixels(self) -> int:
