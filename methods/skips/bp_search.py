@@ -97,7 +97,7 @@ class SearchPlan:
 @dataclass(frozen=True)
 class Evaluated:
     """|V| a coarse pass evaluated, for the search to reuse: at the grid pixels (rows, cols) (L,) and the depths
-    z_m (n_z,), `mag` (n_z, L) float32, -1 where not evaluated."""
+    z_m (n_z,), `mag` (L, n_z) float32, -1 where not evaluated."""
 
     rows: np.ndarray
     cols: np.ndarray
@@ -116,12 +116,12 @@ class Evaluated:
         index = np.full((int(max(rows.max(initial=0), self.rows.max(initial=0))) + 1,
                          int(max(cols.max(initial=0), self.cols.max(initial=0))) + 1), -1, dtype=np.int64)
         index[self.rows, self.cols] = np.arange(len(self.rows))
-        return Known(index[rows, cols], self.mag[shift:shift + overlap])
+        return Known(index[rows, cols], self.mag[:, shift:shift + overlap])
 
 
 @dataclass(frozen=True)
 class Known:
-    """|V| known before the search: per searched pixel (N,) its column of `mag` (-1: none) and `mag` (n_k, L)
+    """|V| known before the search: per searched pixel (N,) its row of `mag` (-1: none) and `mag` (L, n_k)
     float32 at the search's first n_k depth indices (-1: not known)."""
 
     slot: np.ndarray
@@ -130,9 +130,9 @@ class Known:
     def take(self, k: np.ndarray, p: np.ndarray) -> np.ndarray:
         """The known |V| at (depth index, pixel) (n,), -1 where not known."""
         slot = self.slot[p]
-        hit = (slot >= 0) & (k < len(self.mag))
+        hit = (slot >= 0) & (k < self.mag.shape[1])
         out = np.full(len(k), -1.0, dtype=np.float32)
-        out[hit] = self.mag[k[hit], slot[hit]]
+        out[hit] = self.mag[slot[hit], k[hit]]
         return out
 
 
@@ -289,12 +289,13 @@ def _coarse_indices(n_z: int, step: int) -> np.ndarray:
 
 
 class _Samples:
-    """|V| at (fine depth index, pixel), -1 where not evaluated; evaluates batches of (k, pixel) through `evaluate`."""
+    """|V| `mag` (pixel, fine depth index), -1 where not evaluated (pixel-major: the search reads and writes a
+    pixel's depths together); evaluates batches of (k, pixel) through `evaluate`."""
 
     def __init__(self, evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray,
                  window: tuple[np.ndarray, np.ndarray] | None = None, known: Known | None = None):
         self.evaluate, self.x_m, self.y_m, self.z_m, self.window, self.known = evaluate, x_m, y_m, z_m, window, known
-        self.mag = np.full((len(z_m), len(x_m)), -1.0, dtype=np.float32)
+        self.mag = np.full((len(x_m), len(z_m)), -1.0, dtype=np.float32)
         self.count = 0
 
     def run(self, k: np.ndarray, p: np.ndarray) -> None:
@@ -303,12 +304,12 @@ class _Samples:
             value = self.known.take(k, p)
             hit = value >= 0
             if hit.any():
-                self.mag[k[hit], p[hit]] = value[hit]
+                self.mag[p[hit], k[hit]] = value[hit]
                 k, p = k[~hit], p[~hit]
         for start in range(0, len(k), BATCH_POINTS):      # bounded memory: correlate holds (F, batch) phasors
             kb, pb = k[start:start + BATCH_POINTS], p[start:start + BATCH_POINTS]
             points_m = np.column_stack([self.x_m[pb], self.y_m[pb], self.z_m[kb]])
-            self.mag[kb, pb] = np.abs(self.evaluate(points_m))
+            self.mag[pb, kb] = np.abs(self.evaluate(points_m))
         self.count += len(k)
 
     def run_coarse(self, step: np.ndarray, pixels: np.ndarray | None = None) -> np.ndarray:
@@ -327,7 +328,7 @@ class _Samples:
             else:
                 inside = (kk >= self.window[0][pp]) & (kk <= self.window[1][pp])
                 self.run(kk[inside], pp[inside])
-            coarse_max[pix] = np.maximum(self.mag[np.ix_(k_c, pix)].max(axis=0), 0.0)
+            coarse_max[pix] = np.maximum(self.mag[np.ix_(pix, k_c)].max(axis=1), 0.0)
         return coarse_max
 
     def run_inherited(self, step: np.ndarray, window: np.ndarray, lattice: Lattice, local_max: bool) -> None:
@@ -342,7 +343,7 @@ class _Samples:
         if len(inherit) == 0:
             return
         marked = np.zeros((len(step), n_z), dtype=bool)                       # (pixel, depth)
-        i, k = _candidates(self.mag.T[own_px], window[own_px] * 10.0 ** (-lattice.margin_db / 20.0), local_max)
+        i, k = _candidates(self.mag[own_px], window[own_px] * 10.0 ** (-lattice.margin_db / 20.0), local_max)
         marked[own_px[i], k] = True
         union = marked[corners[inherit, 0]]
         for j in range(1, corners.shape[1]):
@@ -379,7 +380,7 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)                     # (N,)
     if lattice is not None and lattice.step_px > 1:
         samples.run_inherited(spacing, window, lattice, local_max)
-        coarse_max = np.maximum(samples.mag.max(axis=0), 0.0)                  # unevaluated: -1
+        coarse_max = np.maximum(samples.mag.max(axis=1), 0.0)                  # unevaluated: -1
     else:
         coarse_max = samples.run_coarse(spacing)
     active = coarse_max > 0
@@ -388,7 +389,7 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     spacing = np.where(active, spacing, 1)
     while (spacing > 1).any():
         refining = np.flatnonzero(spacing > 1)
-        i, k = _candidates(samples.mag.T[refining], window[refining], local_max)
+        i, k = _candidates(samples.mag[refining], window[refining], local_max)
         p = refining[i]
         spacing = np.where(spacing > 1, (spacing + 1) // 2, spacing)
         half = spacing[p]
@@ -396,7 +397,7 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
         p_new = np.concatenate([p, p])
         inside = (k_new >= 0) & (k_new < n_z)
         k_new, p_new = k_new[inside], p_new[inside]
-        fresh = samples.mag[k_new, p_new] < 0
+        fresh = samples.mag[p_new, k_new] < 0
         key = np.unique(p_new[fresh].astype(np.int64) * n_z + k_new[fresh])     # pixel-major, no duplicates
         samples.run(key % n_z, key // n_z)
         window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)
@@ -404,7 +405,7 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     depth_m = np.full(n_px, np.nan)
     max_proj = coarse_max.astype(np.float64)
     if active.any():
-        mag = samples.mag[:, active]
+        mag = samples.mag[active].T
         depth_m[active], max_proj[active] = peak_depth_m(mag, float(z_m[0]), dz_m)
         k_best = np.argmax(mag, axis=0)
         on_cut = ((k_best == 0) & (not z_edges_are_grid_edges[0])) | ((k_best == n_z - 1) &
@@ -415,18 +416,18 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
 
 def _climb(samples: _Samples, active: np.ndarray) -> None:
     """Evaluate unevaluated neighbours of each active pixel's argmax until none is left."""
-    n_z = samples.mag.shape[0]
+    n_z = samples.mag.shape[1]
     pixels = np.flatnonzero(active)
     for _ in range(n_z):
         if len(pixels) == 0:
             return
-        k_best = np.argmax(samples.mag[:, pixels], axis=0)
+        k_best = np.argmax(samples.mag[pixels], axis=1)
         new_k, new_p = [], []
         for side in (-1, 1):
             k = k_best + side
             inside = (k >= 0) & (k < n_z)
             missing = np.zeros(len(pixels), dtype=bool)
-            missing[inside] = samples.mag[k[inside], pixels[inside]] < 0
+            missing[inside] = samples.mag[pixels[inside], k[inside]] < 0
             new_k.append(k[missing])
             new_p.append(pixels[missing])
         k, p = np.concatenate(new_k), np.concatenate(new_p)
@@ -487,7 +488,7 @@ def coarse_roi(evaluate: Evaluate, pixels: np.ndarray, x_m: np.ndarray, y_m: np.
         else:
             peak = _coarse_two_pass(samples, step, pixels, grid_lattice, lattice_step_px,
                                     threshold_db + keep_margin_db + prepass_margin_db)
-        found = peak, np.argmax(samples.mag, axis=0), samples.count   # unevaluated hold -1: never the argmax
+        found = peak, np.argmax(samples.mag, axis=1), samples.count   # unevaluated hold -1: never the argmax
         evaluated = Evaluated(*np.nonzero(grid_lattice), z_m, samples.mag)
     peak, peak_k, n_evaluated = found
     peak_z = z_m[peak_k]
