@@ -205,6 +205,7 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
     antennas = capture.antennas
     backend.warm_up(signal, freqs_hz, antennas.tx_m, antennas.rx_m, volume=method.uses_volume,
                     prior=method.device_prior)
+    method.warm_up(freqs_hz, antennas, grid, skips, prior_value)
 
     timer = StageTimer()
     region = capture_roi(capture, grid, skips)

@@ -103,6 +103,11 @@ class Method:
                               f"{' or '.join(repr(p) for p in self.priors)}, got {prior!r}")
         raise MethodError(f"{self.name} accepts the priors {', '.join(self.priors)}, got {prior!r}")
 
+    def warm_up(self, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, skips: SkipSettings,
+                prior: str | float | None) -> None:
+        """Build, before the timed `run`, what it would otherwise build once per process and configuration
+        (`reconstruct` calls it beside `Backend.warm_up`; nothing by default). `prior`: the parsed prior."""
+
     def run(self, frame: Frame, prior: Prior | float | None, backend: Backend, timer: StageTimer
             ) -> Reconstruction:
         raise NotImplementedError

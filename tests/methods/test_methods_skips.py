@@ -484,3 +484,34 @@ def test_point_target_phasor_sums_equal_the_direct_float64_sum(n_f, factored, mo
     uneven = np.sort(rng.uniform(k[0], k[0] * 1.1, n_f))                   # not equidistant: the direct sum
     assert np.array_equal(bp_search._phasor_sums(delta_m, uneven),
                           np.exp(1j * delta_m[:, :, None] * uneven[None, None]).sum(axis=1))
+
+
+@pytest.mark.parametrize("prior", ["none", 0.31])
+def test_bp_max_first_timed_call_finds_its_search_plan_built_by_the_warm_up(prior, monkeypatch):
+    """`reconstruct` builds the search plan's loss table in BP's warm-up, before the method's timer starts: a
+    first BP_max call of a process (the table's cache empty) builds it there, never inside `run`; the same values."""
+    from methods.bp import BP
+
+    grid = RadarGrid((-0.004, -0.006, 0.28), (0.012, 0.010, 0.34), (5, 5, 61))
+    capture = make_capture(simulate(np.array([[0.004, 0.002, 0.311]]), np.ones(1), MAROON_FREQS_HZ),
+                           MAROON_FREQS_HZ, grid)
+    bp_search._loss_by_radius.cache_clear()
+    built_in_run = []
+    run = BP.run
+
+    def counted_run(self, *args, **kwargs):
+        before = bp_search._loss_by_radius.cache_info().misses
+        result = run(self, *args, **kwargs)
+        built_in_run.append(bp_search._loss_by_radius.cache_info().misses - before)
+        return result
+
+    monkeypatch.setattr(BP, "run", counted_run)
+    rec = reconstruct(capture, "bp", "full", prior=prior, roi="auto")
+    assert built_in_run == [0]
+    assert bp_search._loss_by_radius.cache_info().misses == 1          # built once, by the warm-up
+    assert rec.extra["coarse_step_median"] is not None                  # the search ran (it used the plan)
+    monkeypatch.setattr(BP, "warm_up", lambda *args, **kwargs: None)   # without it, `run` builds it: same depths
+    bp_search._loss_by_radius.cache_clear()
+    again = reconstruct(capture, "bp", "full", prior=prior, roi="auto")
+    assert built_in_run == [0, 1]
+    same(again.depth_m, rec.depth_m)
