@@ -124,7 +124,8 @@ def _host_search_options(skips: SkipSettings, grid, pixels: np.ndarray) -> dict:
         step_px = skips.lattice_px(pixel_pitch_m(grid), skips.search_lattice_step_m)[0]
         if step_px > 1:
             rows, cols = np.nonzero(pixels)                 # the order of x_img[pixels]
-            lattice = bp_search.Lattice(rows, cols, step_px, skips.search_lattice_margin_db)
+            lattice = bp_search.Lattice(rows, cols, step_px, skips.search_lattice_margin_db,
+                                        skips.search_lattice_weak_db)
     return {"lattice": lattice, "local_max": skips.search_local_max}
 
 

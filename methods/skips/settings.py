@@ -73,6 +73,8 @@ class SkipSettings:
     search_local_max: bool = True     # ... that are local maxima among the pixel's evaluated samples (host search)
     search_lattice_step_m: float = 0.002  # coarse samples at every pixel of a 2 mm lattice only (host search) ...
     search_lattice_margin_db: float = 1.0  # ... the others' near their corners' candidates within the window + 1 dB
+    search_lattice_weak_db: float = 3.0  # ... and nowhere where all four corners lie this far below the
+    #                                      filter's skip level (< 0: off)
     search_local_z: bool = False      # each pixel's coarse samples only within the coarse ROI's depths near it (host)
     search_local_z_pad_m: float = 0.0  # ... widened by this on each side
     dense_z_step_m: float = 0.006     # bp_dense_z_search's coarse depth step (window: +- one step at the grid's step)
