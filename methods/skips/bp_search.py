@@ -257,21 +257,33 @@ class Lattice:
         return corners, on_lattice | (corners < 0).any(axis=1)
 
 
-def _candidates(mag_t: np.ndarray, ratio: np.ndarray, local_max: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(pixel, depth index), pixel-major, of the evaluated samples of |V| `mag_t` (n, n_z) (-1: not evaluated) within
-    `ratio` (n,) of their pixel's maximum and, with `local_max`, no smaller than their pixel's nearest evaluated
-    samples on either side (module doc). Works on the evaluated samples only (~25 of a pixel's ~200 depths)."""
-    n_z = mag_t.shape[1]
-    flat = np.flatnonzero(mag_t >= 0)                                          # pixel-major, depth ascending
-    vals = mag_t.ravel()[flat]
-    pixel = flat // n_z
-    keep = vals >= (mag_t.max(axis=1) * ratio)[pixel]
-    if local_max:
-        other = pixel[1:] != pixel[:-1]                                        # a pixel's first / last sample
-        keep[1:] &= other | (vals[1:] >= vals[:-1])
-        keep[:-1] &= other | (vals[:-1] >= vals[1:])
-    flat = flat[keep]
-    return flat // n_z, flat % n_z
+def _candidates(mag: np.ndarray, rows: np.ndarray, ratio: np.ndarray, local_max: bool
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(pixel, depth index), pixel-major, of the evaluated samples of |V| `mag` (n_px, n_z) (-1: not evaluated) in
+    the pixels `rows` (ascending) within `ratio` (len(rows),) of their pixel's maximum and, with `local_max`, no
+    smaller than their pixel's nearest evaluated samples on either side (module doc). One pass over `mag` finds
+    the samples within the window (a few of a pixel's ~25 evaluated ones); their nearest evaluated neighbours are
+    looked up from there."""
+    n_z = mag.shape[1]
+    level = np.full(len(mag), np.inf)
+    level[rows] = np.maximum(mag.max(axis=1)[rows] * ratio, 0.0)
+    flat = np.flatnonzero(mag >= level[:, None])                               # pixel-major, depth ascending
+    pixel, k = flat // n_z, flat % n_z
+    if local_max and len(flat):
+        value = mag[pixel, k]
+        keep = np.ones(len(flat), dtype=bool)
+        for side in (-1, 1):
+            at = k + side
+            todo = np.flatnonzero((at >= 0) & (at < n_z))
+            while len(todo):                                                   # walk to the nearest evaluated one
+                near = mag[pixel[todo], at[todo]]
+                found = near >= 0
+                keep[todo[found]] &= value[todo[found]] >= near[found]
+                todo = todo[~found]
+                at[todo] += side
+                todo = todo[(at[todo] >= 0) & (at[todo] < n_z)]
+        pixel, k = pixel[keep], k[keep]
+    return pixel, k
 
 
 def _near_coarse(marked: np.ndarray, k_c: np.ndarray) -> np.ndarray:
@@ -360,8 +372,8 @@ class _Samples:
         if len(inherit) == 0:
             return
         marked = np.zeros((len(step), n_z), dtype=bool)                       # (pixel, depth)
-        i, k = _candidates(self.mag[own_px], window[own_px] * 10.0 ** (-lattice.margin_db / 20.0), local_max)
-        marked[own_px[i], k] = True
+        p, k = _candidates(self.mag, own_px, window[own_px] * 10.0 ** (-lattice.margin_db / 20.0), local_max)
+        marked[p, k] = True
         union = marked[corners[inherit, 0]]
         for j in range(1, corners.shape[1]):
             union |= marked[corners[inherit, j]]
@@ -407,8 +419,7 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     spacing = np.where(active, spacing, 1)
     while (spacing > 1).any():
         refining = np.flatnonzero(spacing > 1)
-        i, k = _candidates(samples.mag[refining], window[refining], local_max)
-        p = refining[i]
+        p, k = _candidates(samples.mag, refining, window[refining], local_max)
         spacing = np.where(spacing > 1, (spacing + 1) // 2, spacing)
         half = spacing[p]
         k_new = np.concatenate([k - half, k + half])
