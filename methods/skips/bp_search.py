@@ -371,17 +371,20 @@ class _Samples:
             inherit = inherit[corner_max[corners[inherit]].max(axis=1) >= level * window[inherit]]
         if len(inherit) == 0:
             return
-        marked = np.zeros((len(step), n_z), dtype=bool)                       # (pixel, depth)
+        own_row = np.full(len(step), -1)                                       # corners are lattice pixels: own
+        own_row[own_px] = np.arange(len(own_px))
+        marked = np.zeros((len(own_px), n_z), dtype=bool)                     # (own pixel, depth): candidates
         p, k = _candidates(self.mag, own_px, window[own_px] * 10.0 ** (-lattice.margin_db / 20.0), local_max)
-        marked[p, k] = True
-        union = marked[corners[inherit, 0]]
-        for j in range(1, corners.shape[1]):
-            union |= marked[corners[inherit, j]]
+        marked[own_row[p], k] = True
         for s in _unique(step[inherit]):
-            sel = np.flatnonzero(step[inherit] == s)
+            sel = inherit[step[inherit] == s]
             k_c = _coarse_indices(n_z, int(s))
-            p, c = np.nonzero(_near_coarse(union[sel], k_c))                    # pixel-major
-            self.run(k_c[c], inherit[sel][p])
+            near = _near_coarse(marked, k_c)               # per corner: "near" is an OR, so it commutes with the union
+            union = near[own_row[corners[sel, 0]]]
+            for j in range(1, corners.shape[1]):
+                union |= near[own_row[corners[sel, j]]]
+            p, c = np.nonzero(union)                                            # pixel-major
+            self.run(k_c[c], sel[p])
 
 
 def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray, plan: SearchPlan,
@@ -447,10 +450,12 @@ def _climb(samples: _Samples, active: np.ndarray) -> None:
     """Evaluate unevaluated neighbours of each active pixel's argmax until none is left."""
     n_z = samples.mag.shape[1]
     pixels = np.flatnonzero(active)
+    k_all = np.argmax(samples.mag, axis=1)                 # the first round's: no copy of most of the rows
     for _ in range(n_z):
         if len(pixels) == 0:
             return
-        k_best = np.argmax(samples.mag[pixels], axis=1)
+        k_best = k_all[pixels] if k_all is not None else np.argmax(samples.mag[pixels], axis=1)
+        k_all = None
         new_k, new_p = [], []
         for side in (-1, 1):
             k = k_best + side
