@@ -126,7 +126,7 @@ def _host_search_options(skips: SkipSettings, grid, pixels: np.ndarray) -> dict:
             rows, cols = np.nonzero(pixels)                 # the order of x_img[pixels]
             lattice = bp_search.Lattice(rows, cols, step_px, skips.search_lattice_margin_db,
                                         skips.search_lattice_weak_db)
-    return {"lattice": lattice, "local_max": skips.search_local_max}
+    return {"lattice": lattice, "local_max": skips.search_local_max, "jump": skips.search_vertex_jump}
 
 
 def _searched_depth_m(signal, freqs_hz, antennas, grid, z_outer, z_m, dz_m, roi: Roi, skips: SkipSettings,

@@ -273,17 +273,43 @@ def _candidates(mag: np.ndarray, rows: np.ndarray, ratio: np.ndarray, local_max:
         value = mag[pixel, k]
         keep = np.ones(len(flat), dtype=bool)
         for side in (-1, 1):
-            at = k + side
-            todo = np.flatnonzero((at >= 0) & (at < n_z))
-            while len(todo):                                                   # walk to the nearest evaluated one
-                near = mag[pixel[todo], at[todo]]
-                found = near >= 0
-                keep[todo[found]] &= value[todo[found]] >= near[found]
-                todo = todo[~found]
-                at[todo] += side
-                todo = todo[(at[todo] >= 0) & (at[todo] < n_z)]
+            at = _nearest_evaluated(mag, pixel, k, side)
+            has = at >= 0
+            keep[has] &= value[has] >= mag[pixel[has], at[has]]
         pixel, k = pixel[keep], k[keep]
     return pixel, k
+
+
+def _nearest_evaluated(mag: np.ndarray, pixel: np.ndarray, k: np.ndarray, side: int) -> np.ndarray:
+    """The depth index of each sample's (pixel, k) nearest evaluated sample on `side` (-1 or +1) in its pixel of
+    `mag` (n_px, n_z) (-1 where none)."""
+    n_z = mag.shape[1]
+    at = k + side
+    out = np.full(len(k), -1)
+    todo = np.flatnonzero((at >= 0) & (at < n_z))
+    while len(todo):                                                           # walk to the nearest evaluated one
+        found = mag[pixel[todo], at[todo]] >= 0
+        out[todo[found]] = at[todo[found]]
+        todo = todo[~found]
+        at[todo] += side
+        todo = todo[(at[todo] >= 0) & (at[todo] < n_z)]
+    return out
+
+
+def _vertex(mag: np.ndarray, pixel: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Depth index (rounded) of the vertex of the parabola in dB through each sample (pixel, k) of `mag` and its
+    nearest evaluated samples on either side, strictly between those; k itself where a side has none or the
+    three are not concave."""
+    left, right = _nearest_evaluated(mag, pixel, k, -1), _nearest_evaluated(mag, pixel, k, 1)
+    ok = (left >= 0) & (right >= 0)
+    x1, x2, x3 = (np.where(ok, a, k).astype(np.float64) for a in (left, k, right))
+    y1, y2, y3 = (20.0 * np.log10(np.maximum(mag[pixel, np.where(ok, a, k)], 1e-30).astype(np.float64))
+                  for a in (left, k, right))
+    den = (x2 - x1) * (y2 - y3) - (x2 - x3) * (y2 - y1)
+    ok &= (den != 0) & (y2 >= y1) & (y2 >= y3)
+    num = (x2 - x1) ** 2 * (y2 - y3) - (x2 - x3) ** 2 * (y2 - y1)
+    vertex = np.rint(np.where(ok, x2 - 0.5 * num / np.where(ok, den, 1.0), x2)).astype(np.int64)
+    return np.where(ok, np.clip(vertex, left + 1, np.maximum(left + 1, right - 1)), k)
 
 
 def _near_coarse(marked: np.ndarray, k_c: np.ndarray) -> np.ndarray:
@@ -390,7 +416,8 @@ class _Samples:
 def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray, plan: SearchPlan,
                  threshold_db: float | None, z_edges_are_grid_edges: tuple[bool, bool] = (True, True),
                  lattice: Lattice | None = None, local_max: bool = False,
-                 z_window: tuple[np.ndarray, np.ndarray] | None = None, known: Known | None = None) -> SearchResult:
+                 z_window: tuple[np.ndarray, np.ndarray] | None = None, known: Known | None = None,
+                 jump: bool = False) -> SearchResult:
     """Coarse-to-fine depth peak (module doc) of the pixels (x_m, y_m) (N,) over the equidistant depths z_m (n_z,);
     `lattice` and `local_max`: the module doc's shortcuts (off: the search whose condition is proved there);
     `z_window`: each pixel's lowest and highest depth index (N,) for its own coarse samples (the coarse ROI's local
@@ -420,13 +447,22 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     if threshold_db is not None and active.any():
         active &= coarse_max >= coarse_max.max() * 10.0 ** (-threshold_db / 20.0) * window
     spacing = np.where(active, spacing, 1)
+    first = True
     while (spacing > 1).any():
         refining = np.flatnonzero(spacing > 1)
         p, k = _candidates(samples.mag, refining, window[refining], local_max)
+        k_jump, p_jump = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        if jump and first:                    # a pixel's only candidate: its lobe's vertex and the two beside it
+            alone = np.bincount(p, minlength=n_px)[p] == 1
+            p_jump, k_mid = p[alone], _vertex(samples.mag, p[alone], k[alone])
+            k_jump, p_jump = np.concatenate([k_mid - 1, k_mid, k_mid + 1]), np.tile(p_jump, 3)
+            spacing[p[alone]] = 1
+            p, k = p[~alone], k[~alone]
+        first = False
         spacing = np.where(spacing > 1, (spacing + 1) // 2, spacing)
         half = spacing[p]
-        k_new = np.concatenate([k - half, k + half])
-        p_new = np.concatenate([p, p])
+        k_new = np.concatenate([k - half, k + half, k_jump])
+        p_new = np.concatenate([p, p, p_jump])
         inside = (k_new >= 0) & (k_new < n_z)
         k_new, p_new = k_new[inside], p_new[inside]
         fresh = samples.mag[p_new, k_new] < 0

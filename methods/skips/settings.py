@@ -75,6 +75,8 @@ class SkipSettings:
     search_lattice_margin_db: float = 1.0  # ... the others' near their corners' candidates within the window + 1 dB
     search_lattice_weak_db: float = 3.0  # ... and nowhere where all four corners lie this far below the
     #                                      filter's skip level (< 0: off)
+    search_vertex_jump: bool = False  # (host search) a pixel with one coarse candidate refines at the vertex of the
+    #                                   parabola (dB) through it and its neighbours +- 1 sample, then climbs
     search_local_z: bool = False      # each pixel's coarse samples only within the coarse ROI's depths near it (host)
     search_local_z_pad_m: float = 0.0  # ... widened by this on each side
     dense_z_step_m: float = 0.006     # bp_dense_z_search's coarse depth step (window: +- one step at the grid's step)
@@ -132,8 +134,10 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False, kee
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True, bp_dense_z_search=n_freqs == 2)
         # local depth windows where the profiles are sharp (many frequencies; measured on BP_max: formation.md 8)
+        # the vertex jump where the profiles are smooth over a coarse step (few frequencies; formation.md 10)
         return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True,
-                            search_local_z=n_freqs >= LOCAL_Z_MIN_FREQS)
+                            search_local_z=n_freqs >= LOCAL_Z_MIN_FREQS,
+                            search_vertex_jump=n_freqs < LOCAL_Z_MIN_FREQS)
     if dense_beats_search:
         return SkipSettings(mask_bb=True, fsk_keep=keeps_on_device)
     return SkipSettings(mask_bb=True, fsk_keep=True)

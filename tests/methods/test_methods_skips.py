@@ -118,6 +118,8 @@ def test_roi_settings():
     assert default_for("bp", 128, True).bp_coarse_to_fine and default_for("2fsk", 2, False).fsk_keep
     # the host search's local depth windows with many frequencies only (sharp profiles; formation.md section 8)
     assert default_for("bp", 128).search_local_z and not default_for("bp", 2).search_local_z
+    # the vertex jump with few frequencies only (smooth profiles; formation.md section 10)
+    assert default_for("bp", 2).search_vertex_jump and not default_for("bp", 128).search_vertex_jump
     # ... but where the backend keeps inside its device graph (Warp on CUDA), fsk_keep pays there too
     assert resolve("auto", "3fsk", 3, True, True) == SkipSettings(mask_bb=True, fsk_keep=True)
     assert resolve("auto", "bp", 2, True, True) == SkipSettings(mask_bb=True, bp_dense_z_search=True)
@@ -366,6 +368,74 @@ def test_local_depth_windows_hold_the_peaks_and_bound_the_coarse_samples(record_
     missed = search_depth(evaluate, x, y, z_in, plan, None, z_window=off)
     kept = np.isfinite(full_m)
     assert np.mean(np.abs(missed.depth_m[kept] - full_m[kept]) > 0.005) > 0.5
+
+
+def test_search_takes_the_coarse_roi_pass_values_instead_of_evaluating_them_again(record_property):
+    # the coarse ROI's values at its lattice pixels (every other coarse sample of the search there) are taken, not
+    # evaluated again: the same samples, values and depths with fewer evaluations; a value planted in the pass's
+    # record shows up in the search (it is read)
+    rng = fresh_rng(record_property)
+    evaluate, xx, yy, z_m, plan_of = _blob_scene(rng)
+    roi, _ = bp_search.coarse_roi(evaluate, np.ones(xx.shape, dtype=bool), xx, yy, z_m, plan_of, 14.0, 4, 6, 6.0,
+                                  0.01)
+    z_in = z_m[roi.z_indices(z_m)]
+    x, y, plan = xx[roi.pixels], yy[roi.pixels], plan_of(xx[roi.pixels], yy[roi.pixels])
+    known = roi.evaluated.for_search(*np.nonzero(roi.pixels), z_in)
+    plain = search_depth(evaluate, x, y, z_in, plan, 14.0)
+    reused = search_depth(evaluate, x, y, z_in, plan, 14.0, known=known)
+    same(reused.depth_m, plain.depth_m)
+    same(reused.max_projection, plain.max_projection)
+    n_known = int((known.take(*np.nonzero(np.ones((len(z_in), len(x)), dtype=bool))) >= 0).sum())
+    assert 0 < n_known and reused.n_evaluated < plain.n_evaluated
+    p = int(np.flatnonzero(known.slot >= 0)[np.argmax(plain.max_projection[known.slot >= 0])])  # strongest reused
+    known.mag[known.slot[p], :] = np.where(known.mag[known.slot[p], :] >= 0, 1e3, -1.0)
+    assert search_depth(evaluate, x, y, z_in, plan, 14.0, known=known).max_projection[p] == 1e3
+
+
+def test_weak_lattice_corners_leave_their_pixels_unevaluated_and_the_kept_depths_unchanged(record_property):
+    # an inherited pixel whose four lattice corners all lie 3 dB below the filter's skip level evaluates nothing: on
+    # a blob over a floor the filtered depths stay those of the lattice search, with fewer samples; pixels that pass
+    # the filter are never among the skipped ones
+    rng = fresh_rng(record_property)
+    evaluate, xx, yy, z_m, plan_of = _blob_scene(rng)
+    rows, cols = np.nonzero(np.ones(xx.shape, dtype=bool))
+    x, y, plan = xx.ravel(), yy.ravel(), plan_of(xx.ravel(), yy.ravel())
+    results = {}
+    for weak_db in (-1.0, 3.0, 200.0):
+        lattice = bp_search.Lattice(rows, cols, 2, 1.0, weak_db)
+        results[weak_db] = search_depth(evaluate, x, y, z_m, plan, 14.0, lattice=lattice, local_max=True)
+    off, on, huge = (filter_depth(r.depth_m, r.max_projection, 14.0) for r in results.values())
+    same(on, off)
+    same(huge, off)
+    assert results[3.0].n_evaluated < 0.8 * results[-1.0].n_evaluated
+    assert results[200.0].n_evaluated == results[-1.0].n_evaluated                 # nothing that far below
+    skipped = results[3.0].max_projection == 0
+    assert skipped.any() and not np.isfinite(off[skipped]).any()
+
+
+def test_vertex_jump_refines_single_lobes_at_the_parabola_vertex(record_property):
+    # one Gaussian lobe per pixel (a parabola in dB): the vertex through the candidate and its neighbours is the
+    # lobe's peak, so the jump (vertex +- 1, then the climb) finds the depths of the halving search with fewer
+    # samples; the vertex of a parabola sampled unevenly, rounded and kept between the neighbours
+    rng = fresh_rng(record_property)
+    n_px, width_m, dz_m, step = 300, 0.010, 0.001, 7
+    z_m = np.arange(0.25, 0.35 + 1e-9, dz_m)
+    evaluate = _gaussian_profiles(rng.uniform(0.26, 0.34, (n_px, 1)), rng.uniform(0.2, 1.0, (n_px, 1)), width_m)
+    loss_db = 20 * np.log10(np.e) * (np.arange(1, step + 1) * dz_m / 2) ** 2 / (2 * width_m ** 2)
+    plan = SearchPlan.uniform(n_px, step, loss_db, margin_db=1.0)
+    x = np.arange(n_px, dtype=float)
+    halving, jump = (search_depth(evaluate, x, x * 0, z_m, plan, None, local_max=True, jump=j) for j in (False, True))
+    same(jump.depth_m, halving.depth_m)
+    coarse = n_px * len(bp_search._coarse_indices(len(z_m), step))
+    assert jump.n_evaluated - coarse < 0.75 * (halving.n_evaluated - coarse)
+    vertex_k = rng.uniform(20, 30)
+    mag = np.full((1, 60), -1.0, dtype=np.float32)
+    ks = np.array([int(vertex_k) - 6, int(vertex_k) + 1, int(vertex_k) + 9])
+    mag[0, ks] = 10.0 ** (-0.05 * (ks - vertex_k) ** 2 / 20.0)
+    got = bp_search._vertex(mag, np.zeros(1, dtype=int), ks[1:2])
+    assert got[0] == np.rint(vertex_k)
+    mag[0, ks[0]] = -1.0                                                           # a side missing: the candidate
+    assert bp_search._vertex(mag, np.zeros(1, dtype=int), ks[1:2])[0] == ks[1]
 
 
 # ---- physics with every skip on ---------------------------------------------------------------------------------
