@@ -29,7 +29,7 @@ step with loss(step dz / 2) <= psf_max_loss_db at its distance from the axis, an
 candidate_margin_db (>= loss(dz / 2), tiny). Extended scenes can have peaks sharper than a point target's
 (interference); the margin covers that, and `bench.perf.correlate --section skips` measures it on the catalogue.
 
-Two measured shortcuts (options of `search_depth`; the condition above no longer guarantees the full grid's
+Measured shortcuts (options of `search_depth`; the condition above no longer guarantees the full grid's
 argmax with them, so `bench.perf skips` and docs/measurements/formation.md measure them against it):
 * local maxima only (`local_max`): a candidate must also be no smaller than the nearest evaluated samples on either
   side in its pixel. On a lobe that is unimodal between evaluated samples the halving then brackets the lobe's
@@ -40,7 +40,13 @@ argmax with them, so `bench.perf skips` and docs/measurements/formation.md measu
   pixels of the set) evaluate every coarse sample; each other pixel evaluates the coarse samples within one coarse
   step of its lattice corners' candidates (within the window + `margin_db`), and the refinement goes on from its
   own values. The image is laterally smooth over the lattice (2 mm against a lateral resolution of ~4 mm at 30
-  cm), so a pixel's peak lies where its corners' peaks are.
+  cm), so a pixel's peak lies where its corners' peaks are. With `weak_db` >= 0 a pixel whose four corners' coarse
+  maxima all lie weak_db below the filter-aware skip level (below) evaluates nothing (depth NaN, magnitude 0).
+* vertex jump (`jump`): a pixel with a single candidate after the coarse samples refines at the vertex of the
+  parabola (in dB) through the candidate and its nearest evaluated samples, +- 1 sample, and the climb ends it,
+  instead of halving (~3 samples instead of ~6 for a lobe that is smooth over a coarse step, as with few
+  frequencies; pixels with several candidates keep the halving, where the lobes compete).
+Values the coarse ROI's pass evaluated (`known`) are taken instead of evaluated again: the same search.
 
 Filter-aware skip: a pixel is kept by the filter iff max_z |V| >= G 10^(-thr/20) with G the image maximum.
 Under the condition above, max_z |V| <= coarse_max 10^(window/20), and G >= G_coarse, so a pixel whose

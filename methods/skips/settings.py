@@ -19,10 +19,12 @@ numbers).
   within threshold + `roi_keep_margin_db` + `roi_prepass_margin_db` of the first pass's maximum (< 0: off).
 * `bp_coarse_to_fine`: BP searches each pixel's depth on a coarse step first and refines around the candidates;
   pixels whose coarse maximum proves them below the filter are not refined (methods.skips.bp_search). Where the
-  search runs on the host, its two measured shortcuts (bp_search's module doc): candidates only at local maxima
+  search runs on the host, its measured shortcuts (bp_search's module doc): candidates only at local maxima
   (`search_local_max`) and the coarse samples of every pixel only on a `search_lattice_step_m` pixel lattice, the
-  other pixels' near their lattice corners' candidates (0: off); with `search_local_z` (and the coarse ROI) each
-  pixel's coarse samples only within the depths of the coarse ROI's lattice pixels that marked it (their peaks +-
+  other pixels' near their lattice corners' candidates (0: off) and, where all four corners lie
+  `search_lattice_weak_db` below the filter's skip level, nowhere; with `search_vertex_jump` (few frequencies) a
+  pixel with one coarse candidate refines at its lobe's parabola vertex; with `search_local_z` (and the coarse ROI)
+  each pixel's coarse samples only within the depths of the coarse ROI's lattice pixels that marked it (their peaks +-
   the ROI's depth pad, + `search_local_z_pad_m`), not the ROI's whole depth range.
 * `bp_range_cpu`: BP with many frequencies on the CPU gathers from range-compressed profiles
 (methods.backends.cpu_range)
