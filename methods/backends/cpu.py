@@ -25,6 +25,9 @@ from methods.ops.depth_peak import peak_depth_m
 from methods.ops.timing import StageTimer
 
 CHUNK_POINTS = 2048     # most points per block: keeps the (chunk x 2*94) float32 work arrays in L2 cache
+# fewer points run on the calling thread (single-threaded BLAS): a pool costs ~1 ms a call, more than the work
+# (BP's depth search climbs in rounds of a few dozen points; 50 points: 0.5-1.0 against 1.6-2.6 ms, load 5)
+MIN_PARALLEL_POINTS = 128
 
 
 def _n_threads() -> int:
@@ -128,6 +131,10 @@ def correlate_numpy(signal: np.ndarray, freqs_hz: np.ndarray, tx_m: np.ndarray, 
     if n_threads == 1 or len(starts) == 1:
         for s in starts:
             work(s)
+    elif len(points_m) < MIN_PARALLEL_POINTS:
+        with _blas_controller().limit(limits=1, user_api="blas"):    # (BLAS threads spin on a few dozen rows)
+            for s in starts:
+                work(s)
     else:
         # each worker runs single-threaded BLAS products: BLAS threads on top of ours oversubscribe the cores
         # (measured 0.37 s instead of 0.19 s for 301x301 points x 2 frequencies on 2 cores)

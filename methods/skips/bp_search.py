@@ -264,49 +264,41 @@ class Lattice:
 
 
 def _candidates(mag: np.ndarray, rows: np.ndarray, ratio: np.ndarray, local_max: bool
-                ) -> tuple[np.ndarray, np.ndarray]:
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(pixel, depth index), pixel-major, of the evaluated samples of |V| `mag` (n_px, n_z) (-1: not evaluated) in
     the pixels `rows` (ascending) within `ratio` (len(rows),) of their pixel's maximum and, with `local_max`, no
-    smaller than their pixel's nearest evaluated samples on either side (module doc). One pass over `mag` finds
-    the samples within the window (a few of a pixel's ~25 evaluated ones); their nearest evaluated neighbours are
-    looked up from there."""
+    smaller than their pixel's nearest evaluated samples on either side (module doc); and the depth indices of
+    those nearest evaluated samples (left, right; -1: none). Works on the list of evaluated samples (~25 of a
+    pixel's ~200 depths), found in one pass over `mag` (no copy of the rows)."""
     n_z = mag.shape[1]
-    level = np.full(len(mag), np.inf)
-    level[rows] = np.maximum(mag.max(axis=1)[rows] * ratio, 0.0)
-    flat = np.flatnonzero(mag >= level[:, None])                               # pixel-major, depth ascending
-    pixel, k = flat // n_z, flat % n_z
-    if local_max and len(flat):
-        value = mag[pixel, k]
-        keep = np.ones(len(flat), dtype=bool)
-        for side in (-1, 1):
-            at = _nearest_evaluated(mag, pixel, k, side)
-            has = at >= 0
-            keep[has] &= value[has] >= mag[pixel[has], at[has]]
-        pixel, k = pixel[keep], k[keep]
-    return pixel, k
+    flat = np.flatnonzero(mag >= 0)                                            # pixel-major, depth ascending
+    asked = np.zeros(len(mag), dtype=bool)
+    asked[rows] = True
+    flat = flat[asked[flat // n_z]]
+    pixel = flat // n_z
+    vals = mag.ravel()[flat]
+    starts = np.flatnonzero(np.concatenate(([True], pixel[1:] != pixel[:-1]))) if len(flat) else flat
+    ratio_of = np.zeros(len(mag))
+    ratio_of[rows] = ratio
+    level = np.maximum.reduceat(vals, starts) * ratio_of[pixel[starts]] if len(flat) else vals
+    keep = vals >= np.repeat(level, np.diff(np.append(starts, len(flat))))
+    first = np.zeros(len(flat) + 1, dtype=bool)                                # first[i]: sample i starts a pixel
+    first[starts] = True
+    first[-1] = True
+    if local_max:
+        keep[1:] &= first[1:-1] | (vals[1:] >= vals[:-1])
+        keep[:-1] &= first[1:-1] | (vals[:-1] >= vals[1:])
+    idx = np.flatnonzero(keep)
+    k = flat % n_z
+    left = np.where(first[idx], -1, k[np.maximum(idx - 1, 0)])
+    right = np.where(first[idx + 1], -1, k[np.minimum(idx + 1, len(flat) - 1)])
+    return pixel[idx], k[idx], left, right
 
 
-def _nearest_evaluated(mag: np.ndarray, pixel: np.ndarray, k: np.ndarray, side: int) -> np.ndarray:
-    """The depth index of each sample's (pixel, k) nearest evaluated sample on `side` (-1 or +1) in its pixel of
-    `mag` (n_px, n_z) (-1 where none)."""
-    n_z = mag.shape[1]
-    at = k + side
-    out = np.full(len(k), -1)
-    todo = np.flatnonzero((at >= 0) & (at < n_z))
-    while len(todo):                                                           # walk to the nearest evaluated one
-        found = mag[pixel[todo], at[todo]] >= 0
-        out[todo[found]] = at[todo[found]]
-        todo = todo[~found]
-        at[todo] += side
-        todo = todo[(at[todo] >= 0) & (at[todo] < n_z)]
-    return out
-
-
-def _vertex(mag: np.ndarray, pixel: np.ndarray, k: np.ndarray) -> np.ndarray:
+def _vertex(mag: np.ndarray, pixel: np.ndarray, k: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
     """Depth index (rounded) of the vertex of the parabola in dB through each sample (pixel, k) of `mag` and its
-    nearest evaluated samples on either side, strictly between those; k itself where a side has none or the
-    three are not concave."""
-    left, right = _nearest_evaluated(mag, pixel, k, -1), _nearest_evaluated(mag, pixel, k, 1)
+    nearest evaluated samples `left` and `right` (-1: none), strictly between those; k itself where a side has none
+    or the three are not concave."""
     ok = (left >= 0) & (right >= 0)
     x1, x2, x3 = (np.where(ok, a, k).astype(np.float64) for a in (left, k, right))
     y1, y2, y3 = (20.0 * np.log10(np.maximum(mag[pixel, np.where(ok, a, k)], 1e-30).astype(np.float64))
@@ -406,7 +398,8 @@ class _Samples:
         own_row = np.full(len(step), -1)                                       # corners are lattice pixels: own
         own_row[own_px] = np.arange(len(own_px))
         marked = np.zeros((len(own_px), n_z), dtype=bool)                     # (own pixel, depth): candidates
-        p, k = _candidates(self.mag, own_px, window[own_px] * 10.0 ** (-lattice.margin_db / 20.0), local_max)
+        p, k, _, _ = _candidates(self.mag, own_px, window[own_px] * 10.0 ** (-lattice.margin_db / 20.0),
+                                 local_max)
         marked[own_row[p], k] = True
         for s in _unique(step[inherit]):
             sel = inherit[step[inherit] == s]
@@ -456,11 +449,11 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
     first = True
     while (spacing > 1).any():
         refining = np.flatnonzero(spacing > 1)
-        p, k = _candidates(samples.mag, refining, window[refining], local_max)
+        p, k, left, right = _candidates(samples.mag, refining, window[refining], local_max)
         k_jump, p_jump = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
         if jump and first:                    # a pixel's only candidate: its lobe's vertex and the two beside it
             alone = np.bincount(p, minlength=n_px)[p] == 1
-            p_jump, k_mid = p[alone], _vertex(samples.mag, p[alone], k[alone])
+            p_jump, k_mid = p[alone], _vertex(samples.mag, p[alone], k[alone], left[alone], right[alone])
             k_jump, p_jump = np.concatenate([k_mid - 1, k_mid, k_mid + 1]), np.tile(p_jump, 3)
             spacing[p[alone]] = 1
             p, k = p[~alone], k[~alone]

@@ -201,3 +201,15 @@ def test_cpu_chunks_cover_every_point_once_in_balanced_blocks(n_threads):
         assert starts.step <= max(CHUNK_POINTS, 1)
         # the slowest thread does at most one chunk more than an even share
         assert math.ceil(len(starts) / n_threads) * starts.step <= n_points / n_threads + starts.step
+
+
+def test_cpu_small_batches_on_the_calling_thread_give_the_pools_values():
+    # a batch under MIN_PARALLEL_POINTS runs on the calling thread with single-threaded BLAS: the values of the same
+    # points inside a batch the worker threads share (float32 products: the same within 1e-6)
+    from methods.backends.cpu import MIN_PARALLEL_POINTS, correlate_numpy
+
+    rng = np.random.default_rng()
+    signal, freqs_hz, points_m = random_problem(rng, 4 * MIN_PARALLEL_POINTS, 2)
+    pooled = correlate_numpy(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m)
+    small = correlate_numpy(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m[:MIN_PARALLEL_POINTS // 3])
+    assert rel_err(small, pooled[:, :MIN_PARALLEL_POINTS // 3]) < 1e-6
