@@ -42,6 +42,18 @@ def _blas_controller() -> ThreadpoolController:
     return ThreadpoolController()
 
 
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+
+
+def _pool(n_threads: int) -> ThreadPoolExecutor:
+    """A worker pool kept per process (its pid: a forked child starts its own) and size: BP's search calls the
+    correlation ~30 times a frame, and starting two threads a call cost 0.1-5 ms (more on a loaded machine)."""
+    key = (os.getpid(), n_threads)
+    if key not in _POOLS:
+        _POOLS[key] = ThreadPoolExecutor(n_threads, thread_name_prefix="correlate")
+    return _POOLS[key]
+
+
 def chunk_starts(n_points: int, n_threads: int) -> range:
     """Starts of equal point chunks of at most CHUNK_POINTS, as many as a multiple of `n_threads`: 13.7 k points
     (a catalogue frame) on 2 threads make 8 chunks of 1.7 k, not 7 of 2048 leaving one thread a chunk alone."""
@@ -138,8 +150,8 @@ def correlate_numpy(signal: np.ndarray, freqs_hz: np.ndarray, tx_m: np.ndarray, 
     else:
         # each worker runs single-threaded BLAS products: BLAS threads on top of ours oversubscribe the cores
         # (measured 0.37 s instead of 0.19 s for 301x301 points x 2 frequencies on 2 cores)
-        with _blas_controller().limit(limits=1, user_api="blas"), ThreadPoolExecutor(n_threads) as pool:
-            list(pool.map(work, starts))
+        with _blas_controller().limit(limits=1, user_api="blas"):
+            list(_pool(n_threads).map(work, starts))
     return out
 
 
