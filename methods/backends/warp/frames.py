@@ -347,3 +347,16 @@ class BufferPool:
                 del self._buffers[old]
             self._buffers[key] = wp.empty(shape, dtype=dtype, device="cpu", pinned=True)
         return self._buffers[key]
+
+    def pinned_flat(self, n: int, dtype, name: str) -> wp.array:
+        """A reused page-locked 1-d host buffer of that name holding at least n elements (it only grows: sizes that
+        change from call to call, a capture's ROI, do not reallocate page-locked memory, ~ms, each time); pageable
+        on Warp-CPU."""
+        have = [k for k in self._buffers if k[0] == name and k[2] == dtype]
+        if have and have[0][1] >= n:
+            return self._buffers[have[0]]
+        for old in [k for k in self._buffers if k[0] == name]:
+            del self._buffers[old]
+        pinned = not wp.get_device(self.wp_device).is_cpu
+        self._buffers[(name, n, dtype)] = buffer = wp.empty(n, dtype=dtype, device="cpu", pinned=pinned)
+        return buffer
