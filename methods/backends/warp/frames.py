@@ -274,7 +274,7 @@ class FrameCache:
             np.copyto(copy, parts[0])
             inputs.upload(staged)
             if self.checks(parts[0]) and not inputs.samples_finite():
-                self._free.setdefault(parts[0].shape, []).append(staged)
+                self._free[parts[0].shape].append(staged)
                 raise NonFiniteSignal("the radar frame has NaN or Inf samples")
         else:
             copy = parts[0].copy()
@@ -287,12 +287,17 @@ class FrameCache:
 
     def _pinned(self, shape) -> wp.array:
         """A pinned (R, T, F) vec2f host buffer: an evicted frame's (its upload finished: the device is synchronised
-        first) or a new one."""
-        free = self._free.get(tuple(shape))
-        if free:
-            wp.synchronize_device(self.wp_device)
-            return free.pop()
-        return wp.empty(tuple(shape), dtype=wp.vec2f, device="cpu", pinned=True)
+        first). The first frame of a shape allocates all the cache can hold at once (FRAME_CACHE_SIZE + 1: page-locked
+        allocation costs ~ms, and the first call of a shape is the warm-up's)."""
+        shape = tuple(shape)
+        if shape not in self._free:
+            self._free[shape] = [wp.empty(shape, dtype=wp.vec2f, device="cpu", pinned=True)
+                                 for _ in range(FRAME_CACHE_SIZE + 1)]
+        free = self._free[shape]
+        if not free:
+            return wp.empty(shape, dtype=wp.vec2f, device="cpu", pinned=True)
+        wp.synchronize_device(self.wp_device)
+        return free.pop()
 
 
 def _equal(a: np.ndarray, b: np.ndarray) -> bool:
