@@ -118,12 +118,12 @@ def make_launch(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
         else:
             pts = wp.empty(n_out, dtype=wp.vec4f, device=dev)
             common = wp.empty((inputs.n_freqs, n_out), dtype=wp.vec2f, device=dev)
-        prep_args = [flag, points, x, y, z, inputs.cycles, pts, common]
+        every = count if count is not None else buffers.constant(
+            ("count.all", str(dev)), lambda: wp.array([2**31 - 1], dtype=wp.int32, device=dev))
+        prep_args = [flag, points, x, y, z, inputs.cycles, pts, common, every]
         if not wp.get_device(dev).is_cpu:    # (tx halves need real blocks: Warp-CPU runs block_dim 1: rx product)
             tc_kernel = kernels.correlate_tiles_tx_split if kernel == "tc3" else kernels.correlate_tiles_tx_halves
             n_tile = int(kernels.TC2_POINTS)
-            every = count if count is not None else buffers.constant(
-                "count.all", lambda: wp.array([2**31 - 1], dtype=wp.int32, device=dev))
             tc_args = [pts, rx4, tx4, inputs.k, gain, mat, common, int(sum_freqs), out, every]
         else:
             tc_kernel, n_tile = kernels.correlate_tiles_rx_product, int(kernels.TC_POINTS)

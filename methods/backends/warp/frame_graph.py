@@ -106,12 +106,13 @@ class GraphCorrelator:
                       inputs=[0, points, empty, empty, empty, inputs.rx, inputs.tx_padded, inputs.k[:f],
                               inputs.cycles[:f], inputs.signal_padded[:f], 0, self.out], device=dev)
             return self.out
+        count = self.every if count is None else count
         wp.launch(ck.prepare_points, dim=n, inputs=[0, points, empty, empty, empty, self.cycles[:f], self.pts,
-                                                    self.common], device=dev)
+                                                    self.common, count], device=dev)
         n_blocks = (n + int(ck.TC2_POINTS) - 1) // int(ck.TC2_POINTS)
         wp.launch_tiled(ck.correlate_tiles_tx_halves, dim=[n_blocks],
                         inputs=[self.pts, self.rx4, self.tx4, self.k[:f], self.gain, self.mat_h, self.common, 0,
-                                self.out, self.every if count is None else count], block_dim=ck.TC_BLOCK, device=dev)
+                                self.out, count], block_dim=ck.TC_BLOCK, device=dev)
         return self.out
 
 
