@@ -1,5 +1,5 @@
-"""The Warp backend's pool of device buffers and its frame cache (methods.backends.warp.frames): BufferPool on Warp's CPU
-device, the frame cache's pinned staging on CUDA."""
+"""The Warp backend's pool of device buffers and its frame cache (methods.backends.warp.frames): the pool on Warp's
+CPU device, the frame cache's pinned staging on CUDA."""
 from __future__ import annotations
 
 import pytest
