@@ -22,14 +22,16 @@ import shutil
 import sys
 import time
 from pathlib import Path
-
-import pandas as pd
-from omegaconf import OmegaConf
+from typing import TYPE_CHECKING
 
 from bench import cli
 from bench.harness import CONFIG_DIR
 from bench.progress import Heartbeat, run_relayed
-from bench.report import agreement, tables
+
+if TYPE_CHECKING:
+    import pandas as pd
+# pandas, OmegaConf and the report's tables are imported where they are used: the report's picture workers are
+# spawned processes, which import this module again (as their __main__), and those imports cost each ~1 s of CPU.
 
 EXPERIMENTS = ("table2", "table3")
 # Runtimes: the median of the calls per capture that fit in 1.2 s, at most 3 (app._reconstruct's rule): 3 for a call
@@ -52,6 +54,8 @@ class SweepFailed(Exception):
 
 def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]:
     """(objects, distances in cm) of the demo: configs/dataset/synthetic.yaml's, the distances replaced when given."""
+    from omegaconf import OmegaConf
+
     from bench.synth import CATALOGUE
 
     settings = OmegaConf.load(CONFIG_DIR / "dataset" / "synthetic.yaml").generate
@@ -141,6 +145,8 @@ def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "rea
                f"report.depth_errors={str(depth_errors).lower()}",
                *TIMING,
                *QUIET]
+    import pandas as pd
+
     print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
     shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells
     returncode, tail = run_relayed(command)     # on a terminal, with the jobs' progress bars (bench.progress)
@@ -177,6 +183,8 @@ def report_page(out: Path) -> Path:
 
 def write_table1(folder: Path) -> str:
     """Table I as `folder/table1.csv` and `.md`; returns its Markdown."""
+    from bench.report import tables
+
     table1 = tables.table1()
     folder.mkdir(parents=True, exist_ok=True)
     table1.to_csv(folder / "table1.csv", index=False, float_format="%.4f")
@@ -185,6 +193,10 @@ def write_table1(folder: Path) -> str:
 
 
 def main() -> int:
+    import pandas as pd
+
+    from bench.report import agreement, tables
+
     parser = cli.ArgumentParser(prog="python -m bench.demo", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--root", type=Path, default=Path("data/synthetic"), help="synthetic dataset root")

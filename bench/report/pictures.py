@@ -481,22 +481,26 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
 
 
 def _capture_pictures(runs: list[tuple[str, Path]], stem: str, out_dir: Path, prior_m: np.ndarray | None,
-                      ply: bool, use: str) -> dict[str, Path]:
-    """Both figures (and the PLY files) of one capture; runs in a worker process of sweep_pictures."""
+                      ply: bool, use: str, recorded: str | None) -> tuple[str, bool]:
+    """One capture, in a worker process of sweep_pictures: (its content key, whether it was drawn). Both figures
+    (and the PLY files) are drawn unless the key equals `recorded`, the key they were last drawn from, and both
+    files are there. The arrays are read once, here, for the key and the figures."""
     cells = [(label, arrays) for label, path in runs if (arrays := read_arrays(path, stem)) is not None]
+    key = _key(cells, stem, prior_m, ply, use)
     files = picture_files(out_dir, stem)
-    return {"point_clouds": point_cloud_figure(cells, stem, files["point_clouds"],
-                                               out_dir / "point_clouds" if ply else None, use=use),
-            "panel": capture_panel(cells, stem, files["panel"], prior_m)}
+    if key == recorded and all(path.is_file() for path in files.values()):
+        return key, False
+    point_cloud_figure(cells, stem, files["point_clouds"], out_dir / "point_clouds" if ply else None, use=use)
+    capture_panel(cells, stem, files["panel"], prior_m)
+    return key, True
 
 
-def _key(runs: list[tuple[str, Path]], stem: str, prior_m: np.ndarray | None, ply: bool, use: str) -> str:
-    """Content key of one capture's pictures: the cells' labels and arrays, the prior, the options and this code."""
-    parts = [stem, ply, use, Path(__file__)]
-    for label, path in runs:
-        arrays = read_arrays(path, stem)
-        if arrays is not None:
-            parts += [label, arrays.depth_m, arrays.gt_depth_m, arrays.magnitude, arrays.x_m, arrays.y_m]
+def _key(cells: list[tuple[str, CaptureArrays]], stem: str, prior_m: np.ndarray | None, ply: bool, use: str) -> str:
+    """Content key of one capture's pictures: the cells' labels and arrays, the prior, the options and the code
+    that draws them (this module and bench.report.sheet)."""
+    parts = [stem, ply, use, Path(__file__), keyed.module_source(sheet)]
+    for label, arrays in cells:
+        parts += [label, arrays.depth_m, arrays.gt_depth_m, arrays.magnitude, arrays.x_m, arrays.y_m]
     return keyed.digest(*parts, prior_m if prior_m is not None else "no prior")
 
 
@@ -508,9 +512,11 @@ def picture_files(out_dir: Path, stem: str) -> dict[str, Path]:
 def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str, np.ndarray] | None = None,
                    ply: bool = True, workers: int | None = None) -> dict[str, dict[str, Path]]:
     """Point-cloud figures (+ PLY) and panels of every capture of the runs ((label, arrays.h5) pairs) under
-    `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}. A capture
-    whose inputs (arrays, labels, prior, options, this module) are unchanged since it was drawn is not redrawn
-    (bench.report.keyed); the others are drawn in `workers` processes (default: one per CPU core)."""
+    `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}. Each
+    capture goes to one of `workers` spawned processes (default: one per CPU core), which reads its arrays once
+    and draws it unless its inputs (arrays, labels, prior, options, the drawing code) are unchanged since it was
+    drawn (bench.report.keyed: the keys are computed there, beside the drawing, not here one capture after another).
+    """
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
@@ -519,18 +525,20 @@ def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str
     use = renderer()
     stems = capture_stems([path for _, path in runs])
     keys = keyed.Keys(out_dir)
-    wanted = {stem: _key(runs, stem, (priors or {}).get(stem), ply, use) for stem in stems}
-    stale = [stem for stem in stems if not keys.fresh(stem, wanted[stem], list(picture_files(out_dir, stem).values()))]
     written = {stem: picture_files(out_dir, stem) for stem in stems}
-    if not stale:
+    if not stems:
         return written
-    workers = max(1, min(len(stale), workers or os.cpu_count() or 1))
-    with bar(len(stale), f"pictures ({use}, {len(stems) - len(stale)} unchanged)", unit="capture") as progress, \
+    workers = max(1, min(len(stems), workers or os.cpu_count() or 1))
+    redrawn = 0
+    with bar(len(stems), f"pictures ({use})", unit="capture") as progress, \
             ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        futures = {stem: pool.submit(_capture_pictures, runs, stem, out_dir, (priors or {}).get(stem), ply, use)
-                   for stem in stale}
+        futures = {stem: pool.submit(_capture_pictures, runs, stem, out_dir, (priors or {}).get(stem), ply, use,
+                                     keys.keys.get(stem)) for stem in stems}
         for stem, future in futures.items():
-            written[stem] = future.result()
-            keys.record(stem, wanted[stem])
+            key, drawn = future.result()
+            if drawn:
+                keys.record(stem, key)
+                redrawn += 1
+            progress.set_postfix_str(f"{progress.n + 1 - redrawn} unchanged", refresh=False)
             progress.update()
     return written

@@ -81,7 +81,9 @@ def splat(tile: np.ndarray, col_px: np.ndarray, row_px: np.ndarray, distance: np
     inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
     pixel = (rows * width + cols)[inside]
     point = np.broadcast_to(np.arange(len(rows))[:, None], rows.shape)[inside]
-    order = np.lexsort((np.asarray(distance)[point], pixel))            # per pixel, the nearest point first
+    rank = np.empty(len(rows), np.int64)                                # 0 = the nearest point
+    rank[np.argsort(np.asarray(distance), kind="stable")] = np.arange(len(rows))
+    order = np.argsort(pixel * len(rows) + rank[point])                 # per pixel, the nearest point first
     pixel, point = pixel[order], point[order]
     first = np.ones(len(pixel), bool)
     first[1:] = pixel[1:] != pixel[:-1]
@@ -113,12 +115,12 @@ def colours(values: np.ndarray, cmap, vmin: float, vmax: float) -> np.ndarray:
         return cmap((np.asarray(values, np.float64) - vmin) / (vmax - vmin), bytes=True)[..., :3]
 
 
-def tick_values(lo: float, hi: float, length_px: int, label_px: int, axis: str, nbins: int | None = None
+def tick_values(lo: float, hi: float, length_pt: float, label_pt: float, axis: str, nbins: int | None = None
                 ) -> np.ndarray:
-    """Major tick positions inside (lo, hi) as matplotlib's AutoLocator places them on an axis of length_px with
-    tick labels of label_px (at most 9 bins, one per 3 label heights along x, 2 along y), or as MaxNLocator(nbins)."""
+    """Major tick positions inside (lo, hi) as matplotlib's AutoLocator places them on an axis of length_pt with
+    tick labels of label_pt (at most 9 bins, one per 3 label sizes along x, 2 along y), or as MaxNLocator(nbins)."""
     if nbins is None:
-        nbins = int(np.clip(length_px // (label_px * (3 if axis == "x" else 2)), 1, 9))
+        nbins = int(np.clip(np.floor(length_pt / (label_pt * (3 if axis == "x" else 2))), 1, 9))
         values = MaxNLocator(nbins, steps=list(TICK_STEPS)).tick_values(min(lo, hi), max(lo, hi))
     else:                                   # MaxNLocator(nbins) as set on a colour bar: its default steps
         values = MaxNLocator(nbins).tick_values(min(lo, hi), max(lo, hi))
@@ -151,6 +153,9 @@ class Sheet:
 
     def px(self, points: float) -> int:
         return max(1, round(points * self.dpi / 72))
+
+    def pt(self, pixels: float) -> float:
+        return pixels * 72 / self.dpi
 
     def paste(self, rgb: np.ndarray, box: Box) -> None:
         """An (h, w, 3) uint8 array at the box's top left corner."""
@@ -188,12 +193,12 @@ class Sheet:
         tick, pad, label_px = self.px(TICK_LENGTH_PT), self.px(TICK_LENGTH_PT), self.px(tick_pt)
         self.draw.rectangle((box.left - 1, box.top - 1, box.right, box.bottom), outline=(0, 0, 0))
         widest = 0
-        for value, label in _ticks(xlim, box.width, label_px, "x"):
+        for value, label in _ticks(xlim, self.pt(box.width), tick_pt, "x"):
             x = box.left + round(to_pixels(value, *xlim, box.width))
             self.draw.line(((x, box.bottom), (x, box.bottom + tick)), fill=(0, 0, 0))
             if x_labels:
                 self.text((x, box.bottom + tick + pad), label, tick_pt, anchor="mt")
-        for value, label in _ticks(ylim, box.height, label_px, "y"):
+        for value, label in _ticks(ylim, self.pt(box.height), tick_pt, "y"):
             y = box.top + round(to_pixels(value, *ylim, box.height, downwards=True))
             self.draw.line(((box.left - 1 - tick, y), (box.left - 1, y)), fill=(0, 0, 0))
             if y_labels:
@@ -233,7 +238,7 @@ class Sheet:
             self.draw.polygon(shape, fill=rgb, outline=(0, 0, 0))
         tick, pad, label_px = self.px(TICK_LENGTH_PT), self.px(TICK_LENGTH_PT), self.px(size_pt)
         widest = 0
-        for value, text in _ticks((vmin, vmax), length, label_px, "y" if vertical else "x", nbins):
+        for value, text in _ticks((vmin, vmax), self.pt(length), size_pt, "y" if vertical else "x", nbins):
             if vertical:
                 y = box.top + round(to_pixels(value, vmin, vmax, box.height, downwards=True))
                 self.draw.line(((box.right, y), (box.right + tick, y)), fill=(0, 0, 0))
@@ -273,7 +278,7 @@ class Sheet:
         return path
 
 
-def _ticks(limits: tuple[float, float], length_px: int, label_px: int, axis: str, nbins: int | None = None
+def _ticks(limits: tuple[float, float], length_pt: float, label_pt: float, axis: str, nbins: int | None = None
            ) -> list[tuple[float, str]]:
-    values = tick_values(*limits, length_px, label_px, axis, nbins)
+    values = tick_values(*limits, length_pt, label_pt, axis, nbins)
     return list(zip(values, tick_labels(values), strict=True))
