@@ -68,6 +68,7 @@ def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]
 GENERATE_S_PER_CAPTURE = 2.6
 SWEEP_S_PER_CAPTURE = {"table2": 1.9, "table3": 18.4}
 BP_MAX_S_PER_CAPTURE = 6.7           # table3's longest cell
+REPORT_S_PER_CAPTURE = 0.8           # the report page, table3's pictures drawn anew (docs/measurements/sweep.md)
 
 
 def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
@@ -78,13 +79,14 @@ def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
     missing = sum(not (root / o / str(d)).is_dir() for o in objects for d in distances)
     stored = store.is_dir() and any((store / "cells").glob("*.json"))
     sweeps_s = {name: n * s for name, s in SWEEP_S_PER_CAPTURE.items()}
-    total_s = missing * GENERATE_S_PER_CAPTURE + sum(sweeps_s.values())
+    total_s = missing * GENERATE_S_PER_CAPTURE + sum(sweeps_s.values()) + n * REPORT_S_PER_CAPTURE
     steps = [f"generating {missing} of {n} captures ~{missing * GENERATE_S_PER_CAPTURE:.0f} s" if missing
              else f"the {n} captures are on disk"]
     steps += [f"{name} ~{seconds:.0f} s" for name, seconds in sweeps_s.items()]
+    steps.append(f"the report ~{n * REPORT_S_PER_CAPTURE:.0f} s")
     text = (f"demo: about {total_s / 60:.0f} min on two quiet cores ({', '.join(steps)}); the long step is "
             f"table3's BP_max (~{n * BP_MAX_S_PER_CAPTURE:.0f} s, one back-projection over 128 frequencies per "
-            f"capture), then the report's pictures (~20 s when drawn anew)")
+            f"capture)")
     if stored:
         text += f"; cells already in {store} are reused, so this run may take much less"
     return text
@@ -174,7 +176,7 @@ def publish(sweep_root: Path, rows: pd.DataFrame, table: str, results: Path) -> 
 
 def report_page(out: Path) -> Path:
     """`out/report.html` (bench.report.html) over the demo's sweep roots; pictures for table3, which holds every method
-    (they cost several seconds per capture and cell)."""
+    (about 1 s of CPU per capture, drawn by one spawned process per core)."""
     from bench.report import html
 
     return html.write_report([out / name for name in EXPERIMENTS], out / "report.html",

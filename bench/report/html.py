@@ -11,7 +11,7 @@ clouds over the ground truth, depth / magnitude / signed-error panels; PLY files
 Hydra overrides, full configuration, code version, device and host. Images are files beside the page (linked by
 relative paths: keep the page with its sweep roots), so the page stays small; nothing is loaded from the network.
 Default output: `SWEEP_ROOT/report.html` (one root) or `report.html` in the roots' common folder. Pictures are
-written under `SWEEP_ROOT/pictures/` (several seconds per capture; `--no-pictures` leaves them out); pictures,
+written under `SWEEP_ROOT/pictures/` (about 1 s of CPU per capture; `--no-pictures` leaves them out); pictures,
 plots and the page are redrawn only when their inputs changed (bench.report.keyed).
 """
 from __future__ import annotations
