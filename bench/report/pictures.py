@@ -408,6 +408,21 @@ def crop_cm(cells: list[CaptureArrays], margin_cm: float = 1.0) -> tuple[tuple, 
     return (x_cm.min() - margin_cm, x_cm.max() + margin_cm), (y_cm.min() - margin_cm, y_cm.max() + margin_cm)
 
 
+def map_rgb(image: np.ndarray, extent_cm: tuple, xlim: tuple, ylim: tuple, view: sheet.Box, cmap, vmin: float,
+            vmax: float, overlay: np.ndarray | None = None) -> np.ndarray:
+    """(view.height, view.width, 3) uint8: a map (row 0 at the top of `extent_cm`) in the window xlim x ylim (cm)
+    by nearest pixel, coloured by `cmap` over vmin..vmax; white outside the map. `overlay` (no_error_categories):
+    no depth in grey and depth without ground truth in black, painted over the colours where it says so."""
+    values, inside = sheet.map_pixels(image, extent_cm, xlim, ylim, view.width, view.height)
+    rgb = sheet.colours(values, cmap, vmin, vmax)
+    if overlay is not None:
+        categories, _ = sheet.map_pixels(overlay, extent_cm, xlim, ylim, view.width, view.height)
+        for category, colour in enumerate((NO_DEPTH_COLOUR, NO_TRUTH_COLOUR)):
+            rgb[categories == category] = _rgb8(matplotlib.colors.to_rgb(colour))
+    rgb[~inside] = sheet.WHITE
+    return rgb
+
+
 def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
                   prior_m: np.ndarray | None = None) -> Path:
     """Per capture: ground truth and prior on top, then per cell depth, magnitude (dB) and signed error (cm); every
@@ -422,7 +437,6 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
     depth_map = matplotlib.colormaps["viridis"].with_extremes(bad=NO_DEPTH_COLOUR)
     level_map = matplotlib.colormaps["plasma"].with_extremes(bad=NO_DEPTH_COLOUR)
     error_map = matplotlib.colormaps["RdBu_r"].with_extremes(bad=NO_DEPTH_COLOUR)
-    overlay_rgb = _rgb8([matplotlib.colors.to_rgb(c) for c in (NO_DEPTH_COLOUR, NO_TRUTH_COLOUR)])
     dpi, last = PANEL_DPI, len(cells)
     width, height = round(10.5 * dpi), round((3.0 * (len(cells) + 1) + 0.6) * dpi)
     page = sheet.Sheet(width, height, dpi)
@@ -433,14 +447,7 @@ def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
     def show(row: int, col: int, image: np.ndarray, cmap, vmin: float, vmax: float, title: str,
              overlay: np.ndarray | None = None) -> None:
         view = boxes[row][col].fit(aspect)
-        values, inside = sheet.map_pixels(image, truth.extent_cm, xlim, ylim, view.width, view.height)
-        rgb = sheet.colours(values, cmap, vmin, vmax)
-        if overlay is not None:             # no depth (grey), depth without ground truth (black) over the errors
-            categories, _ = sheet.map_pixels(overlay, truth.extent_cm, xlim, ylim, view.width, view.height)
-            for category, colour in enumerate(overlay_rgb):
-                rgb[categories == category] = colour
-        rgb[~inside] = sheet.WHITE
-        page.paste(rgb, view)
+        page.paste(map_rgb(image, truth.extent_cm, xlim, ylim, view, cmap, vmin, vmax, overlay), view)
         page.axes(view, xlim, ylim, title=title, xlabel="x (cm)" if row == last else None,
                   ylabel="y (cm)" if col == 0 else None, x_labels=row == last, y_labels=col == 0)
 

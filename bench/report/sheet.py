@@ -254,10 +254,10 @@ class Sheet:
         else:
             self.text((box.left + box.width / 2, box.bottom + tick + 2 * pad + label_px), label, size_pt, "mt")
 
-    def legend(self, xy: tuple[int, int], entries: list[tuple[str, str]], size_pt: float, frame: bool = False
-               ) -> None:
-        """Colour patches and their labels, one per line, from the top left corner `xy`; entries: (colour, label)
-        with matplotlib colour specifications."""
+    def legend(self, xy: tuple[int, int], entries: list[tuple[str, str]], size_pt: float, frame: bool = False,
+               across: bool = False) -> None:
+        """Colour patches and their labels from the top left corner `xy`, one per line (or side by side,
+        `across`); entries: (colour, label) with matplotlib colour specifications."""
         size = self.px(size_pt)
         step, patch_w, patch_h = round(1.4 * size), 2 * size, round(0.7 * size)
         left, top = xy
@@ -266,11 +266,20 @@ class Sheet:
             self.draw.rectangle((left, top, left + width, top + step * len(entries) + size // 2),
                                 outline=(204, 204, 204), fill=WHITE)
             left, top = left + size // 2, top + size // 2
-        for number, (colour, label) in enumerate(entries):
-            y = top + number * step + step // 2
+        x, y = left, top + step // 2
+        for colour, label in entries:
             rgb = tuple(round(255 * c) for c in matplotlib.colors.to_rgb(colour))
-            self.draw.rectangle((left, y - patch_h // 2, left + patch_w, y + patch_h // 2), fill=rgb)
-            self.text((left + patch_w + size // 2, y), label, size_pt, anchor="lm")
+            self.draw.rectangle((x, y - patch_h // 2, x + patch_w, y + patch_h // 2), fill=rgb)
+            self.text((x + patch_w + size // 2, y), label, size_pt, anchor="lm")
+            if across:
+                x += patch_w + size // 2 + self.text_width(label, size_pt) + 2 * size
+            else:
+                y += step
+
+    def legend_width(self, entries: list[tuple[str, str]], size_pt: float) -> int:
+        """The width in pixels of `legend(..., across=True)`."""
+        size = self.px(size_pt)
+        return sum(2 * size + size // 2 + self.text_width(label, size_pt) + 2 * size for _, label in entries) - 2 * size
 
     def save(self, path: Path) -> Path:
         path.parent.mkdir(parents=True, exist_ok=True)

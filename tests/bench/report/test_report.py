@@ -100,6 +100,26 @@ def test_ply_files_are_open3ds_bytes_and_a_cloud_of_no_points_is_one(tmp_path):
     assert len(o3d.io.read_point_cloud(str(empty)).points) == 0 and b"element vertex 0\n" in empty.read_bytes()
 
 
+def test_an_error_map_shows_each_pixel_in_its_colour_or_category():
+    """map_rgb as the panels and depth-error figures use it: the error's colour, grey without depth, black for depth
+    without ground truth, white outside the map (here a 3 x 2 map in a window twice its width)."""
+    import matplotlib
+
+    from bench.report import sheet
+
+    depth = np.array([[0.313, np.nan, 0.30], [0.293, 0.30, 0.32]])   # errors off the colour map's bin edges
+    truth = np.array([[0.30, 0.30, np.nan], [0.30, 0.30, 0.30]])
+    cell = pictures.CaptureArrays(depth, truth, np.ones_like(depth), np.array([-0.01, 0.0, 0.01]),
+                                  np.array([0.005, -0.005]))
+    cmap = matplotlib.colormaps["RdBu_r"]
+    rgb = pictures.map_rgb(pictures.signed_error_cm(cell), cell.extent_cm, (-3.0, 3.0), (-1.0, 1.0),
+                           sheet.Box(0, 0, 6, 2), cmap, -2.0, 2.0, pictures.no_error_categories(cell))
+    expected = lambda error_cm: np.array(cmap((error_cm + 2.0) / 4.0, bytes=True)[:3])   # noqa: E731
+    np.testing.assert_array_equal(rgb[0, 1:4], [expected(1.3), [154, 154, 154], [0, 0, 0]])   # #9a9a9a, black
+    np.testing.assert_array_equal(rgb[1, 1:4], [expected(-0.7), expected(0.0), expected(2.0)])
+    assert (rgb[:, 0] == 255).all() and (rgb[:, 4:] == 255).all()                    # 1 cm pixels, map 3 cm wide
+
+
 def test_signed_error_keeps_the_direction_of_a_wrap():
     behind = pictures.CaptureArrays(np.array([[0.32]]), np.array([[0.30]]), np.ones((1, 1)), np.zeros(1), np.zeros(1))
     assert pictures.signed_error_cm(behind)[0, 0] == pytest.approx(2.0)
