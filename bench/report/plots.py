@@ -78,7 +78,7 @@ def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path, workers: int |
     direction), saturating at +-ERROR_LIMIT_CM; "no depth" in grey, depth where the ground truth has no surface in
     black (bench.report.pictures). runs: (label, arrays.h5 of the run) pairs; every capture found gets a figure,
     redrawn only when its cells' labels or arrays (or this code) changed (bench.report.keyed). The figures to
-    draw are drawn by `workers` forked processes (default: one per core; ~2 s each for Table III's 14 cells), where
+    draw are drawn by `workers` forked processes (default: one per core; ~0.3 s each for Table III's 14 cells), where
     this process may fork (`_fork_safe`), else here one after another: the same files either way.
     """
     from bench.report import keyed, pictures
