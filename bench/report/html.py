@@ -212,13 +212,13 @@ def _pictures_section(root: Path, page_dir: Path) -> str:
     them, one block per capture."""
     from bench.report import pictures, tables
 
-    pictures.probe_renderer()         # its child process runs beside the reading of the priors
     runs = []
     for job in _job_dirs(root):
         if (job / "arrays.h5").is_file():
             runs.append((tables.job_label(job / "results.csv"), job / "arrays.h5"))
     if not runs:
         return "<p>No job wrote arrays.h5: no pictures.</p>"
+    pictures.probe_renderer()         # its child process runs beside the reading of the priors
     stems = pictures.capture_stems([path for _, path in runs])
     written = pictures.sweep_pictures(runs, root / "pictures", _realsense_priors(root, stems))
     blocks = []

@@ -120,6 +120,18 @@ def test_an_error_map_shows_each_pixel_in_its_colour_or_category():
     assert (rgb[:, 0] == 255).all() and (rgb[:, 4:] == 255).all()                    # 1 cm pixels, map 3 cm wide
 
 
+def test_a_cell_without_any_depth_still_gets_its_views_and_an_empty_ply(sweep_root, tmp_path):
+    stem = "01_plate_30_000000"
+    cells = [(job.name, pictures.read_arrays(job / "arrays.h5", stem)) for job in sorted(sweep_root.glob("*_*"))]
+    label, cell = cells[1]
+    cells[1] = (label, pictures.CaptureArrays(np.full_like(cell.depth_m, np.nan), cell.gt_depth_m,
+                                              np.zeros_like(cell.magnitude), cell.x_m, cell.y_m))
+    pictures.point_cloud_figure(cells, stem, tmp_path / "cloud.png", tmp_path / "ply", use="splat")
+    pictures.capture_panel(cells, stem, tmp_path / "panel.png")
+    assert b"element vertex 0\n" in (tmp_path / "ply" / stem / f"{pictures._file_name(label)}.ply").read_bytes()
+    assert (tmp_path / "cloud.png").stat().st_size > 0 and (tmp_path / "panel.png").stat().st_size > 0
+
+
 def test_signed_error_keeps_the_direction_of_a_wrap():
     behind = pictures.CaptureArrays(np.array([[0.32]]), np.array([[0.30]]), np.ones((1, 1)), np.zeros(1), np.zeros(1))
     assert pictures.signed_error_cm(behind)[0, 0] == pytest.approx(2.0)
