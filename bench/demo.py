@@ -138,6 +138,8 @@ def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "rea
     stderr is passed through and its tail kept, so a failure ends in the job's own reason (SweepFailed).
     `distances_cm`: only the demo's captures at these distances (default: the dataset config's); `depth_errors`:
     the sweep root also gets depth_errors/<capture>.png (what --update-results publishes)."""
+    import pandas as pd
+
     objects, distances = demo_captures(distances_cm)
     captures = ",".join(f"{name}/{distance}" for name in objects for distance in distances)
     command = [sys.executable, "-m", "bench", "-m", f"experiment={experiment}", f"hydra/launcher={LAUNCHER}",
@@ -147,8 +149,6 @@ def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "rea
                f"report.depth_errors={str(depth_errors).lower()}",
                *TIMING,
                *QUIET]
-    import pandas as pd
-
     print(f"\n$ python {' '.join(command[1:-len(QUIET)])}", flush=True)
     shutil.rmtree(out / experiment, ignore_errors=True)    # the store keeps the finished cells
     returncode, tail = run_relayed(command)     # on a terminal, with the jobs' progress bars (bench.progress)
