@@ -136,7 +136,7 @@ def default_for(method: str, n_freqs: int, dense_beats_search: bool = False, kee
         if dense_beats_search and n_freqs <= 3:
             return SkipSettings(mask_bb=True, bp_dense_z_search=n_freqs == 2)
         # local depth windows where the profiles are sharp (many frequencies; measured on BP_max: formation.md 8)
-        # the vertex jump where the profiles are smooth over a coarse step (few frequencies; formation.md 10)
+        # the vertex jump where the profiles are smooth over a coarse step (few frequencies; formation.md 11)
         return SkipSettings(mask_bb=True, coarse_roi=True, bp_coarse_to_fine=True, bp_range_cpu=True,
                             search_local_z=n_freqs >= LOCAL_Z_MIN_FREQS,
                             search_vertex_jump=n_freqs < LOCAL_Z_MIN_FREQS)

@@ -118,7 +118,7 @@ def test_roi_settings():
     assert default_for("bp", 128, True).bp_coarse_to_fine and default_for("2fsk", 2, False).fsk_keep
     # the host search's local depth windows with many frequencies only (sharp profiles; formation.md section 8)
     assert default_for("bp", 128).search_local_z and not default_for("bp", 2).search_local_z
-    # the vertex jump with few frequencies only (smooth profiles; formation.md section 10)
+    # the vertex jump with few frequencies only (smooth profiles; formation.md section 11)
     assert default_for("bp", 2).search_vertex_jump and not default_for("bp", 128).search_vertex_jump
     # ... but where the backend keeps inside its device graph (Warp on CUDA), fsk_keep pays there too
     assert resolve("auto", "3fsk", 3, True, True) == SkipSettings(mask_bb=True, fsk_keep=True)
