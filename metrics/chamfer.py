@@ -5,6 +5,7 @@ reconstruction. Build the ground-truth tree once per capture (`PointSet`) and re
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -14,9 +15,17 @@ if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
 
-#: threads of a nearest-neighbour query: every core where the process scores alone; scoring worker processes set
-#: 1 (bench.harness.workers), so that a pool of them does not start a thread per core each beside the timed calls
-QUERY_THREADS = -1
+#: threads of a nearest-neighbour query; None: one per core the process may run on (`usable_cores`) where it scores
+#: alone; scoring worker processes set 1 (bench.harness.workers), so that a pool of them does not start a thread
+#: per core each beside the timed calls
+QUERY_THREADS: int | None = None
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity). Not SciPy's `workers=-1`, which is `os.cpu_count()`:
+    the host's every core, e.g. the whole machine under a container limited to a few of them, where each query
+    then started (and waited for) a thread per host core."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 @dataclass
@@ -42,7 +51,7 @@ class PointSet:
 
 def nearest_distances_m(src_m: np.ndarray, dst: PointSet) -> np.ndarray:
     """Distance (m) from every source point to its nearest destination point; (N,) float64."""
-    distances, _ = dst.tree.query(np.asarray(src_m, dtype=np.float64), k=1, workers=QUERY_THREADS)
+    distances, _ = dst.tree.query(np.asarray(src_m, dtype=np.float64), k=1, workers=QUERY_THREADS or usable_cores())
     return distances
 
 

@@ -187,6 +187,22 @@ def reference_projective(depth_m: np.ndarray, used: np.ndarray, source_mask: np.
     return float(np.mean(np.abs(errors_mm[counted])) / 10.0), int(counted.sum())
 
 
+def _c_s_and_off_err_cm(radar_points_m: np.ndarray, off: np.ndarray, gt_points: PointSet, sound_points: PointSet
+                        ) -> tuple[float, float]:
+    """C_s (cm: `radar_points_m` to `gt_points`) and off_err (cm: the radar points flagged `off`, off the object, to
+    the sound ground truth's points). Where both go to the same points (the sound profile) the off points'
+    distances are picked from C_s's query, not queried again: the same numbers, since a point's nearest distance
+    does not depend on the other points of its query."""
+    off_points_m = radar_points_m[off]
+    if gt_points is not sound_points or not len(radar_points_m) or not len(gt_points.points_m):
+        off_err_cm = (float(np.mean(nearest_distances_m(off_points_m, sound_points))) * 100.0
+                      if len(off_points_m) and len(sound_points.points_m) else float("nan"))
+        return one_sided_chamfer_m(radar_points_m, gt_points) * 100.0, off_err_cm
+    distances_m = nearest_distances_m(radar_points_m, gt_points)
+    off_err_cm = float(np.mean(distances_m[off])) * 100.0 if len(off_points_m) else float("nan")
+    return float(np.mean(distances_m)) * 100.0, off_err_cm
+
+
 def _failure(depth_m: np.ndarray, used: np.ndarray, selected: np.ndarray, scores: dict) -> str:
     """Why a metric is NaN ('' when all four are numbers)."""
     if not np.isfinite(depth_m).any():
@@ -226,12 +242,10 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
     outside = used & ~selected
     counted = selected.sum() + outside.sum()
     silhouette_px = int(gt.silhouette.sum())
-    off_points_m = points_m[off]
-    off_err_cm = (float(np.mean(nearest_distances_m(off_points_m, gt.points))) * 100.0
-                  if len(off_points_m) and len(gt.points.points_m) else float("nan"))
+    c_s_cm, off_err_cm = _c_s_and_off_err_cm(radar_points_m, off[selected], gt_points, gt.points)
     scores = {
         "C_g_cm": one_sided_chamfer_m(gt_points.points_m, PointSet(radar_points_m)) * 100.0,
-        "C_s_cm": one_sided_chamfer_m(radar_points_m, gt_points) * 100.0,
+        "C_s_cm": c_s_cm,
         "P_cm": p_cm, "P_e_cm": p_e_cm,
         "coverage_pct": 100.0 * (selected & gt.silhouette).sum() / silhouette_px if silhouette_px else float("nan"),
         "off_pct": 100.0 * (off.sum() + outside.sum()) / counted if counted else float("nan"),

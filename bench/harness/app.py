@@ -30,6 +30,7 @@ from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 from bench import cli
 from bench.harness import CONFIG_DIR, captures, stages, validate, workers
 from bench.harness import results as outputs
+from bench.harness.codeversion import default_cache_dir
 from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
@@ -289,6 +290,33 @@ def _store(root: str) -> Store:
     return Store(root)
 
 
+def kept_inputs_dir(cfg: DictConfig) -> Path | None:
+    """`store.cache` as a folder (auto: the user's cache folder, bench.harness.codeversion.default_cache_dir), or
+    None (null, or auto where no cache folder is known)."""
+    setting = OmegaConf.select(cfg, "store.cache", default=None)
+    if setting is None:
+        return None
+    return default_cache_dir() if setting == "auto" else Path(to_absolute_path(str(setting)))
+
+
+def _kept_inputs(cfg: DictConfig, dataset_root: Path) -> Store | None:
+    """Where a run without a result store keeps the ground truths' rasters, the parsed meshes and the files' digests,
+    by content (bench.harness.captures): `store.cache`, so that a later process neither imports Open3D nor casts
+    rays for captures seen before. None where nothing is kept: `store.cache=null`, or `auto` where the user's cache
+    folder cannot be written (nothing kept, the run goes on). A folder inside the dataset is a user error: the
+    dataset is never written."""
+    folder = kept_inputs_dir(cfg)
+    if folder is None:
+        return None
+    if folder.resolve().is_relative_to(dataset_root.resolve()):
+        raise cli.UserError(f"store.cache={cfg.store.cache}", f"is inside the dataset ({dataset_root}), which is "
+                                                              "never written: name a folder outside it")
+    existing = next(p for p in (folder, *folder.parents) if p.exists())
+    if not (existing.is_dir() and os.access(existing, os.W_OK | os.X_OK)):
+        return None                 # `auto` only: a named folder was checked by `main` (one line if not writable)
+    return _store(str(folder))
+
+
 def _grid_attrs(grid: RadarGrid) -> dict:
     return {"bb_min_m": list(grid.bb_min_m), "bb_max_m": list(grid.bb_max_m), "grid_size": list(grid.size)}
 
@@ -363,6 +391,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     if not root.exists():
         raise DatasetError(root, "dataset root does not exist")
     store = None if cfg.store.dir is None else _store(to_absolute_path(str(cfg.store.dir)))
+    kept = store if store is not None else _kept_inputs(cfg, root)
     grid_override = _container(cfg.grid.override)
     spec = parse_frame_spec(OmegaConf.to_container(cfg.dataset.frame) if OmegaConf.is_list(cfg.dataset.frame)
                             else cfg.dataset.frame)
@@ -397,7 +426,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                     hit = None           # its runtime was measured beside other jobs (or not recorded): re-measure
             if hit is None:
                 row, task, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
-                                                store, grid_override, device, timing, identity)
+                                                kept, grid_override, device, timing, identity)
                 row.update(hostname=socket.gethostname(), code_version=cell["code"], key=key)
                 result = _scored(task, row, grid, out_dir, store, pool, writer)
                 computed_s.append(time.perf_counter() - started)
@@ -487,20 +516,20 @@ def _live_handlers() -> list[logging.Handler]:
 
 
 def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_filtered: bool, antenna_files,
-                  store: Store | None, grid_override, device: str, timing: str, identity: dict
+                  kept: Store | None, grid_override, device: str, timing: str, identity: dict
                   ) -> tuple[dict, workers.Scoring, RadarGrid]:
     """Read and reconstruct one capture frame: (row with its score columns empty, what scoring it needs, metric
-    grid)."""
+    grid). `kept`: where parsed meshes and ground truths are kept (`_kept_inputs`)."""
     def read(parts):
         with stages.stage("reading"):
-            return captures.read(capture_dir, frame, parts, empty_filtered, antenna_files, store)
+            return captures.read(capture_dir, frame, parts, empty_filtered, antenna_files, kept)
 
     capture = read(_method_parts(cfg.prior.name))
     with stages.stage("ground truth"):
-        key = None if store is None else captures.kept_key(store, capture_dir, frame, empty_filtered,
-                                                           capture.radar.grid)
+        key = None if kept is None else captures.kept_key(kept, capture_dir, frame, empty_filtered,
+                                                          capture.radar.grid)
         gt = captures.ground_truth(capture_dir, capture, lambda: read((*_method_parts(cfg.prior.name), "mesh")),
-                                   store, key)
+                                   kept, key)
     grid = capture.radar.grid
     row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index, **identity,
            "radar_time_s": capture.radar.timestamp_s, **_pairing_columns(capture, capture_dir)}
@@ -552,6 +581,8 @@ def main(cfg: DictConfig) -> None:
         validate.check(cfg)                                       # every setting in its range (one line if not)
         if cfg.store.dir is not None:
             cli.check_creatable_dir(to_absolute_path(str(cfg.store.dir)), f"store.dir={cfg.store.dir}")
+        elif OmegaConf.select(cfg, "store.cache", default=None) not in (None, "auto"):
+            cli.check_creatable_dir(kept_inputs_dir(cfg), f"store.cache={cfg.store.cache}")
         started = time.perf_counter()
         params = params_string(list(hydra_cfg.overrides.task))
         rows = run(cfg, out_dir, generate=synthetic_asked(list(hydra_cfg.overrides.task)),
