@@ -83,7 +83,7 @@ def kept_mesh(store: Store, path: Path) -> Mesh:
     return mesh
 
 
-def _mesh_arrays(path: Path, h5: h5py.File, _) -> dict[str, np.ndarray]:
+def _mesh_arrays(path: Path, h5: h5py.File) -> dict[str, np.ndarray]:
     """A kept mesh's arrays as `read_mesh` returned them: (N, 3) finite float64 vertices, (M, 3) integer triangles
     indexing them; DatasetError naming `path` otherwise."""
     vertices, triangles = (_dataset(path, h5, name, kind) for name, kind in (("vertices", "f"), ("triangles", "i")))
