@@ -403,6 +403,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                                           shared=timing == "parallel"))
     if pool is not None:
         timing = "parallel"              # the workers share the host with the timed calls (bench.harness.workers)
+    writing = pool or workers.output_process(shared=timing == "parallel")     # writes the depth files elsewhere
     rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _JobLog()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
@@ -428,7 +429,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 row, task, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
                                                 kept, grid_override, device, timing, identity)
                 row.update(hostname=socket.gethostname(), code_version=cell["code"], key=key)
-                result = _scored(task, row, grid, out_dir, store, pool, writer)
+                result = _scored(task, row, grid, out_dir, store, pool, writing, writer)
                 computed_s.append(time.perf_counter() - started)
             else:
                 row, arrays, attrs = hit
@@ -438,7 +439,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 result = workers.done((row, arrays, {}))
             rows.append({"object": row["object"], "distance": row["distance"], "cached": hit is not None})
             writer.submit(_finish, result, rows, len(rows) - 1, out_dir, grid, store, key, results_csv,
-                          hit is None and pool is not None, job_log)
+                          hit is None and writing is not None, job_log)
     except BaseException:
         with stages.stage("outputs"):
             writer.close()
@@ -456,15 +457,19 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     return rows
 
 
-def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, store: Store | None, pool,
+def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, store: Store | None, pool, writing,
             writer: BackgroundWriter):
-    """A computed capture scored (bench.harness.workers): in this thread without a pool (its cell then written by
-    the writer), else in a worker, which also writes its depth files and cell. A future of (row, arrays or None,
-    the worker's seconds by stage)."""
+    """A computed capture scored (bench.harness.workers): in this thread without a pool, its depth files and cell
+    then written by the output process (`writing`, bench.harness.workers.output_process) or, without one, the
+    writer; else in a worker, which also writes them. A future of (row, arrays, their image or None, the other
+    process's seconds by stage)."""
     if pool is None:
         with stages.stage("metrics"):
             scores, arrays = workers.score(task)
         row.update(scores)
+        if writing is not None:
+            return writing.submit(workers.write, row, arrays, grid, out_dir, _stem(row), _grid_attrs(grid),
+                                  None if store is None else str(store.root))
         if store is not None:
             writer.submit(store.put, row["key"], row, arrays, _grid_attrs(grid))
         return workers.done((row, arrays, {}))
