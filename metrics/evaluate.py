@@ -160,6 +160,24 @@ def ground_truth_from_rasters(depth_m: np.ndarray, reference_depth_m: np.ndarray
                        reference=reference)
 
 
+def ground_truth_arrays(gt: GroundTruth) -> dict[str, np.ndarray]:
+    """What `ground_truth_from_rasters` computed (rasters, points, silhouettes, the reference's splat), by name: kept
+    on disk (bench.harness.captures), `ground_truth_from_arrays` gives the same ground truth back without
+    computing it again."""
+    return {"depth_m": gt.depth_m, "reference_depth_m": gt.reference.depth_m, "points_m": gt.points.points_m,
+            "silhouette": gt.silhouette, "eroded_silhouette": gt.eroded_silhouette,
+            "reference_points_m": gt.reference.points.points_m, "reference_splat_mm": gt.reference.splat_mm}
+
+
+def ground_truth_from_arrays(arrays: dict[str, np.ndarray], grid: RadarGrid, metadata) -> GroundTruth:
+    """The ground truth of `ground_truth_arrays`' arrays (checked by the caller) with the capture's metadata."""
+    reference = ReferenceGroundTruth(depth_m=arrays["reference_depth_m"], points=PointSet(arrays["reference_points_m"]),
+                                     splat_mm=arrays["reference_splat_mm"], mask_bb_m=reference_mask_bb_m(metadata))
+    return GroundTruth(grid=grid, depth_m=arrays["depth_m"], points=PointSet(arrays["points_m"]),
+                       silhouette=arrays["silhouette"], eroded_silhouette=arrays["eroded_silhouette"],
+                       mask_bb_m=metadata.mask_bb_m, mask_erosion=metadata.mask_erosion, reference=reference)
+
+
 def _mean_abs_cm(depth_m: np.ndarray, gt_depth_m: np.ndarray, compared: np.ndarray) -> float:
     if not compared.any():
         return float("nan")

@@ -2,11 +2,14 @@
 of a frame read once) and the ground truth (ray casts, silhouettes, KD-tree). With a result store, the parsed mesh
 is kept there by the content of its file (`<store>/meshes/`), so later sweeps need no Open3D to read it.
 
-The ground truth's rasters (the costly part: two ray casts of the mesh) are also kept on disk under the result
-store, `<store>/ground_truth/<key>.h5`, keyed like the store's cells by the content of the files they come from
-(metadata, alignment, mesh, the frame's pose, the radar calibration's grid) and the code version: a later sweep
-(another experiment on the same captures) reads two arrays instead of importing Open3D, reading the mesh and
-casting rays, and needs no mesh at all unless its prior is the photogrammetry one.
+The ground truth (its rasters, the costly part: two ray casts of the mesh, and what is derived from them: points,
+silhouettes, the reference profile's splat) is also kept on disk under the result store,
+`<store>/ground_truth/<key>.h5`, keyed like the store's cells by the content of the files it comes from (metadata,
+alignment, mesh, the frame's pose, the radar calibration's grid) and the code version: a later sweep (another
+experiment on the same captures) reads its arrays instead of importing Open3D, reading the mesh, casting rays and
+deriving them, and needs no mesh at all unless its prior is the photogrammetry one. A sweep without a result store
+keeps both in `store.cache` instead (bench.harness.app._kept_inputs; the user's cache folder by default). A kept
+file is checked as it is read and ignored, with a warning naming it, when it fails a check (`_read_kept`).
 """
 from __future__ import annotations
 
@@ -29,12 +32,20 @@ from bench.maroon import reader
 from bench.maroon.antennas import load_antenna_array
 from methods.domain.capture import Capture, Mesh
 from methods.domain.errors import DatasetError
-from metrics.evaluate import GroundTruth, ground_truth_from_rasters, ground_truth_rasters_m
+from metrics.evaluate import (
+    GroundTruth,
+    ground_truth_arrays,
+    ground_truth_from_arrays,
+    ground_truth_from_rasters,
+    ground_truth_rasters_m,
+)
 
 CAPTURES_KEPT = 16           # capture frames kept in memory (a sweep's captures: the paper's 8 at one distance)
 GROUND_TRUTHS_KEPT = 16
 log = logging.getLogger("bench")
-RASTERS = ("depth_m", "reference_depth_m")
+#: the arrays of a kept ground truth (metrics.evaluate.ground_truth_arrays) and their numpy dtype kinds
+GROUND_TRUTH_ARRAYS = {"depth_m": "f", "reference_depth_m": "f", "points_m": "f", "silhouette": "b",
+                       "eroded_silhouette": "b", "reference_points_m": "f", "reference_splat_mm": "f"}
 
 _CAPTURES: collections.OrderedDict = collections.OrderedDict()   # (frame key) -> (Capture, parts read)
 _GROUND_TRUTHS: collections.OrderedDict = collections.OrderedDict()
@@ -95,21 +106,32 @@ def _mesh_arrays(path: Path, h5: h5py.File) -> dict[str, np.ndarray]:
     return {"vertices": vertices.astype(np.float64, copy=False), "triangles": triangles.astype(np.int64, copy=False)}
 
 
-def _raster_arrays(path: Path, h5: h5py.File, shape: tuple[int, int]) -> dict[str, np.ndarray]:
-    """A kept ground truth's rasters: float64 depth maps of the grid's `shape` (NaN = no surface, else finite);
-    DatasetError naming `path` otherwise."""
-    arrays = {name: _dataset(path, h5, name, "f") for name in RASTERS}
+def _ground_truth_arrays(path: Path, h5: h5py.File, shape: tuple[int, int]) -> dict[str, np.ndarray]:
+    """A kept ground truth's arrays (metrics.evaluate.ground_truth_arrays): float64 depth maps of the grid's `shape`
+    (NaN = no surface, else finite), a finite float64 splat of that shape, boolean silhouettes of that shape, finite
+    float64 N x 3 points; DatasetError naming `path` otherwise."""
+    arrays = {name: _dataset(path, h5, name, kind) for name, kind in GROUND_TRUTH_ARRAYS.items()}
     for name, values in arrays.items():
-        if values.shape != shape or values.dtype != np.float64 or np.isinf(values).any():
-            raise DatasetError(path, f"{name!r} must be a float64 depth map of {shape[0]} x {shape[1]} pixels, found "
-                                     f"{values.dtype} {values.shape}")
+        kind = GROUND_TRUTH_ARRAYS[name]
+        if name.endswith("points_m"):
+            ok = values.ndim == 2 and values.shape[1] == 3 and values.dtype == np.float64 and np.isfinite(values).all()
+            wanted = "float64 N x 3 points"
+        else:
+            ok = values.shape == shape and values.dtype == (np.bool_ if kind == "b" else np.float64) and (
+                kind == "b" or not np.isinf(values).any()) and (name != "reference_splat_mm" or
+                                                                np.isfinite(values).all())
+            wanted = f"{'boolean' if kind == 'b' else 'float64'} map of {shape[0]} x {shape[1]} pixels"
+        if not ok:
+            raise DatasetError(path, f"{name!r} must be a {wanted}, found {values.dtype} {values.shape}")
     return arrays
 
 
 def _dataset(path: Path, h5: h5py.File, name: str, kind: str) -> np.ndarray:
+    """Dataset `name` of numpy dtype kind `kind` ('f', 'b'; 'i': signed or unsigned integers), read whole."""
     node = h5.get(name)
     if not isinstance(node, h5py.Dataset) or node.dtype.kind not in (kind, "u" if kind == "i" else kind):
-        raise DatasetError(path, f"{name!r} is missing or not an array of {'numbers' if kind == 'f' else 'indices'}")
+        raise DatasetError(path, f"{name!r} is missing or not an array of "
+                                 f"{ {'f': 'numbers', 'b': 'booleans', 'i': 'indices'}[kind]}")
     return node[()]
 
 
@@ -155,11 +177,9 @@ def load_kept(store: Store, key: str, capture: Capture) -> GroundTruth | None:
     """The ground truth kept under `key` for this capture frame (its radar part read), or None: none kept, or a
     file that fails a check (`_read_kept`; a warning names it, and the rasters are cast again)."""
     grid = capture.radar.grid
-    rasters = _read_kept(store, store.root / "ground_truth" / f"{key}.h5", key, _raster_arrays,
-                         "casting the ground truth again", grid.image_shape)
-    if rasters is None:
-        return None
-    return ground_truth_from_rasters(*(rasters[name] for name in RASTERS), grid, capture.metadata)
+    arrays = _read_kept(store, store.root / "ground_truth" / f"{key}.h5", key, _ground_truth_arrays,
+                        "casting the ground truth again", grid.image_shape)
+    return None if arrays is None else ground_truth_from_arrays(arrays, grid, capture.metadata)
 
 
 def ground_truth(capture_dir: Path, capture: Capture, with_mesh: Callable[[], Capture], store: Store | None = None,
@@ -187,7 +207,7 @@ def ground_truth(capture_dir: Path, capture: Capture, with_mesh: Callable[[], Ca
         rasters = ground_truth_rasters_m(meshed, grid)
         gt = ground_truth_from_rasters(*rasters, grid, meshed.metadata)
         if key is not None:
-            _keep(store.root / "ground_truth" / f"{key}.h5", dict(zip(RASTERS, rasters, strict=True)), key)
+            _keep(store.root / "ground_truth" / f"{key}.h5", ground_truth_arrays(gt), key)
     return _remember(memory_key, gt)
 
 

@@ -136,10 +136,10 @@ def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
     """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays: one process
     (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES cores or more where the job runs
     alone, else None (the job's writer thread writes them, as on 2 cores, where a process would take a core from the
-    methods). A thread shares the interpreter with the main thread: on the H100 host its PNG, preview and HDF5 work
-    (46 ms a capture, 26 of them waiting for the interpreter lock while the main thread scored) fell behind the
-    methods and metrics, and each job began by waiting for the last one's files; the process holds no lock of the
-    main thread. The rows stay timed as they were (the thread did the same work beside the timed calls)."""
+    methods). A thread shares the interpreter lock with the main thread: on the H100 host its PNG, preview and HDF5
+    work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind the methods and metrics, and each job
+    began by waiting for the last one's files (Table III: 5.2 s on the thread, 1.3 s waited for). The rows stay timed
+    as they were (the thread did the same work beside the timed calls)."""
     return None if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES else pool(1)
 
 

@@ -143,3 +143,22 @@ def test_auto_keeps_in_the_users_cache_folder_and_an_unwritable_one_keeps_nothin
     fresh()
     app.run(_cfg(synth_root, "auto"), tmp_path / "b")
     assert len(casts) == 2 and not list((tmp_path / "ro").iterdir())
+
+
+def test_a_kept_ground_truth_is_the_one_derived_from_the_mesh_array_for_array(synth_root, tmp_path, counted):
+    from metrics.evaluate import ground_truth_arrays
+
+    _, _, fresh = counted
+    gts = []
+    for name in ("cast", "kept"):
+        fresh()
+        app.run(_cfg(synth_root, tmp_path / "cache"), tmp_path / name)
+        (gt,) = captures._GROUND_TRUTHS.values()
+        gts.append(gt)
+    cast, kept = (ground_truth_arrays(gt) for gt in gts)
+    assert cast.keys() == kept.keys() and len(cast) == 7
+    for name, values in cast.items():
+        assert kept[name].dtype == values.dtype and kept[name].flags.c_contiguous, name
+        np.testing.assert_array_equal(kept[name], values, err_msg=name)
+    assert (gts[1].mask_bb_m, gts[1].reference.mask_bb_m, gts[1].mask_erosion) == \
+        (gts[0].mask_bb_m, gts[0].reference.mask_bb_m, gts[0].mask_erosion)
