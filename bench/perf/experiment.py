@@ -7,7 +7,8 @@ clock on (bench.harness.stages): seconds in composing the jobs' configurations, 
 ground truth, the methods (`methods.reconstruct` calls: prior, warm-up, method), the metrics, the output files (on
 the main thread: what it waited for; `outputs (background)` is the writer thread's, the output process's and the
 scoring workers' time, overlapped; with scoring workers, bench.harness.workers, the metrics are theirs,
-overlapped), the merge (tables and plots), and `other` (the interpreter, Hydra's start and its first composition, job set-up).
+overlapped), the merge (tables and plots), and `other` (the interpreter, Hydra's start and its first composition,
+job set-up).
 Runs: `cold`, a store that keeps nothing yet (the ground truth is cast from the meshes), then `--repeat` runs
 `kept` on the store it left with its cells removed (every cell computes again; the ground truth kept by content
 is read back, as a second experiment on the same captures finds it). `--no-store` runs as `store.dir=null` does
