@@ -341,24 +341,35 @@ def _stem(row: dict) -> str:
     return f"{row['object']}_{row['distance']}_{row['frame']:06d}"
 
 
+def _arrays_attrs(grid: RadarGrid, key: str | None) -> dict:
+    """The attributes of a capture's group in arrays.h5."""
+    return {**_grid_attrs(grid), "key": key or ""}
+
+
 def _write_outputs(out_dir: Path, row: dict, arrays: dict | bytes | None, grid: RadarGrid, store: Store | None,
-                   key: str | None, results_csv: ResultsCsv, depth_written: bool = False) -> None:
-    """One capture's files: depth PNG + JSON + preview (unless a worker wrote them), its arrays in arrays.h5 (copied
-    from the store's cell when there is one, or from the image of one a worker compressed: `arrays` as bytes), its
-    results.csv line."""
+                   key: str | None, results_csv: ResultsCsv, depth_written: bool = False,
+                   arrays_written: bool = False) -> None:
+    """One capture's files: depth PNG + JSON + preview (unless a worker wrote them), its arrays in arrays.h5 (unless
+    the output process wrote them; copied from the store's cell when there is one, or from the image of one a worker
+    compressed: `arrays` as bytes), its results.csv line."""
     with stages.stage("outputs"):
         stem = _stem(row)
         if not depth_written:
             write_depth(out_dir, stem, arrays["depth_m"], grid)
-        array_attrs = {**_grid_attrs(grid), "key": key or ""}
-        if store is not None:      # compressed once, into the store
-            store.copy_arrays(key, out_dir / "arrays.h5", stem, array_attrs)
-        elif isinstance(arrays, bytes):
-            with h5py.File(io.BytesIO(arrays), "r") as image:
-                copy_cell(image, out_dir / "arrays.h5", stem, array_attrs)
-        else:
-            write_arrays(out_dir / "arrays.h5", stem, arrays, array_attrs)
+        if not arrays_written:
+            _add_arrays(out_dir / "arrays.h5", stem, arrays, _arrays_attrs(grid, key), store, key)
         results_csv.add(row)       # appended after every capture: an interruption loses no row
+
+
+def _add_arrays(path: Path, stem: str, arrays: dict | bytes | None, attrs: dict, store: Store | None,
+                key: str | None) -> None:
+    if store is not None:      # compressed once, into the store
+        store.copy_arrays(key, path, stem, attrs)
+    elif isinstance(arrays, bytes):
+        with h5py.File(io.BytesIO(arrays), "r") as image:
+            copy_cell(image, path, stem, attrs)
+    else:
+        write_arrays(path, stem, arrays, attrs)
 
 
 def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str = "alone", params: str = "",
@@ -404,6 +415,9 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     if pool is not None:
         timing = "parallel"              # the workers share the host with the timed calls (bench.harness.workers)
     writing = pool or workers.output_process(shared=timing == "parallel")     # writes the depth files elsewhere
+    # without a store every row is computed and goes through the output process, whose tasks run one after another:
+    # it writes arrays.h5 too (with a store, rows read from it are copied into arrays.h5 here: one writer only)
+    owns_arrays = pool is None and writing is not None and store is None
     rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _JobLog()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
@@ -429,7 +443,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 row, task, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
                                                 kept, grid_override, device, timing, identity)
                 row.update(hostname=socket.gethostname(), code_version=cell["code"], key=key)
-                result = _scored(task, row, grid, out_dir, store, pool, writing, writer)
+                result = _scored(task, row, grid, out_dir, store, pool, writing, writer, owns_arrays)
                 computed_s.append(time.perf_counter() - started)
             else:
                 row, arrays, attrs = hit
@@ -439,7 +453,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 result = workers.done((row, arrays, {}))
             rows.append({"object": row["object"], "distance": row["distance"], "cached": hit is not None})
             writer.submit(_finish, result, rows, len(rows) - 1, out_dir, grid, store, key, results_csv,
-                          hit is None and writing is not None, job_log)
+                          hit is None and writing is not None, job_log, hit is None and owns_arrays)
     except BaseException:
         with stages.stage("outputs"):
             writer.close()
@@ -458,7 +472,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
 
 
 def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, store: Store | None, pool, writing,
-            writer: BackgroundWriter):
+            writer: BackgroundWriter, owns_arrays: bool = False):
     """A computed capture scored (bench.harness.workers): in this thread without a pool, its depth files and cell
     then written by the output process (`writing`, bench.harness.workers.output_process) or, without one, the
     writer; else in a worker, which also writes them. A future of (row, arrays, their image or None, the other
@@ -469,7 +483,8 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
         row.update(scores)
         if writing is not None:
             return writing.submit(workers.write, row, arrays, grid, out_dir, _stem(row), _grid_attrs(grid),
-                                  None if store is None else str(store.root))
+                                  None if store is None else str(store.root),
+                                  _arrays_attrs(grid, row["key"]) if owns_arrays else None)
         if store is not None:
             writer.submit(store.put, row["key"], row, arrays, _grid_attrs(grid))
         return workers.done((row, arrays, {}))
@@ -479,9 +494,11 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
 
 
 def _finish(result, rows: list[dict], index: int, out_dir: Path, grid: RadarGrid, store: Store | None,
-            key: str | None, results_csv: ResultsCsv, by_worker: bool, job_log) -> None:
+            key: str | None, results_csv: ResultsCsv, by_worker: bool, job_log, arrays_by_worker: bool = False
+            ) -> None:
     """On the writer thread, in capture order: the capture's scored row (waiting for its worker, which wrote its
-    depth files: `by_worker`) as entry `index` of the run's `rows`, and its files (`_write_outputs`)."""
+    depth files: `by_worker`, and its arrays into arrays.h5: `arrays_by_worker`) as entry `index` of the run's
+    `rows`, and its files (`_write_outputs`)."""
     row, arrays, worker_s = result.result()
     for stage, seconds in worker_s.items():
         stages.add_background(stage, seconds)
@@ -489,7 +506,8 @@ def _finish(result, rows: list[dict], index: int, out_dir: Path, grid: RadarGrid
     cached = rows[index]["cached"]
     entry = {**row, "cached": cached}
     rows[index] = entry
-    _write_outputs(out_dir, entry, arrays, grid, store, key, results_csv, depth_written=by_worker)
+    _write_outputs(out_dir, entry, arrays, grid, store, key, results_csv, depth_written=by_worker,
+                   arrays_written=arrays_by_worker)
     if not cached:
         job_log("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],
                 row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])

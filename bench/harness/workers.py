@@ -116,30 +116,35 @@ def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_att
 
 
 def write(row: dict, arrays: dict, grid: RadarGrid, out_dir: Path, stem: str, grid_attrs: dict,
-          store_root: str | None) -> tuple[dict, bytes | None, dict[str, float]]:
+          store_root: str | None, arrays_attrs: dict | None = None) -> tuple[dict, bytes | None, dict[str, float]]:
     """In a worker (or the output process, `output_process`): a scored capture's depth PNG, JSON and preview and,
     with a store, its cell (arrays, then the row). Returns (row, where there is no store to copy the arrays from,
-    the cell's image, bench.harness.store.cell_image, else None, seconds spent on outputs)."""
-    from bench.harness.store import cell_image
+    the cell's image, bench.harness.store.cell_image, else None, seconds spent on outputs). With `arrays_attrs`
+    (the output process of a run without a store: the one writer of the run's arrays.h5, its tasks done in order)
+    the arrays go into `out_dir/arrays.h5` here, with these attributes, and no image is returned."""
+    from bench.harness.store import cell_image, write_arrays
 
     started = time.perf_counter()
     write_depth(out_dir, stem, arrays["depth_m"], grid)
+    image = None
     if store_root is not None:
         _store(store_root).put(row["key"], row, arrays, grid_attrs)
-        image = None
+    elif arrays_attrs is not None:
+        write_arrays(out_dir / "arrays.h5", stem, arrays, arrays_attrs)
     else:
         image = cell_image(arrays, grid_attrs)
     return row, image, {"outputs": time.perf_counter() - started}
 
 
 def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
-    """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays: one process
-    (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES cores or more where the job runs
-    alone, else None (the job's writer thread writes them, as on 2 cores, where a process would take a core from the
-    methods). A thread shares the interpreter lock with the main thread: on the H100 host its PNG, preview and HDF5
-    work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind the methods and metrics, and each job
-    began by waiting for the last one's files (Table III: 5.2 s on the thread, 1.3 s waited for). The rows stay timed
-    as they were (the thread did the same work beside the timed calls)."""
+    """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays (without a
+    store: into arrays.h5): one process (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES
+    cores or more where the job runs alone, else None (the job's writer thread writes them, as on 2 cores, where a
+    process would take a core from the methods). A thread shares the interpreter lock with the main thread: on the
+    H100 host its PNG, preview and HDF5 work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind
+    the methods and metrics, and each job began by waiting for the last one's files (Table III: 5.2 s on the
+    thread, 1.3 s waited for). The rows stay timed as they were (the thread did the same work beside the timed
+    calls)."""
     return None if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES else pool(1)
 
 

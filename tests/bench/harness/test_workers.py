@@ -94,13 +94,14 @@ def test_pool_sizes(monkeypatch, cores, expected):
 @pytest.mark.parametrize("with_store", [True, False])
 def test_files_written_by_the_output_process_are_the_writer_threads(root, tmp_path, monkeypatch, with_store):
     """Without scoring workers, a host of OUTPUT_PROCESS_MIN_CORES cores writes each capture's depth files, cell and
-    compressed arrays in one process instead of the writer thread: the same rows, files, arrays and cells, and the
-    rows timed as before (alone, or contended on a busy machine)."""
+    compressed arrays (without a store: into arrays.h5) in one process instead of the writer thread: the same rows,
+    files, arrays and cells, and the rows timed as before (alone, or contended on a busy machine)."""
     rows, stores, handed = {}, {}, []
     monkeypatch.setattr(workers, "OUTPUT_PROCESS_MIN_CORES", 1)
     process = workers.output_process()
     submit = process.submit
-    monkeypatch.setattr(process, "submit", lambda fn, *args: handed.append(fn.__name__) or submit(fn, *args))
+    monkeypatch.setattr(process, "submit", lambda fn, *args: handed.append((fn.__name__, args[-1] is not None)) or
+                        submit(fn, *args))
     for name, min_cores in (("thread", 10**6), ("process", 1)):
         monkeypatch.setattr(workers, "OUTPUT_PROCESS_MIN_CORES", min_cores)
         stores[name] = tmp_path / f"store_{name}" if with_store else None
@@ -117,7 +118,8 @@ def test_files_written_by_the_output_process_are_the_writer_threads(root, tmp_pa
         assert len(list((stores["process"] / "cells").glob("*.h5"))) == 2
         assert all(r["cached"] for r in _run(root, tmp_path / "again", stores["process"], 0))
     assert {r["timing"] for r in rows["process"]} <= {"alone", "contended"}
-    assert handed == ["write", "write"]                                # the process wrote both captures' files
+    # the process wrote both captures' files, and without a store their arrays into arrays.h5 (its one writer)
+    assert handed == [("write", not with_store)] * 2
 
 
 def test_a_run_that_defers_its_files_is_complete_once_they_are_finished(root, tmp_path):
