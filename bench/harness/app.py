@@ -309,6 +309,8 @@ def _kept_inputs(cfg: DictConfig, dataset_root: Path) -> Store | None:
     if folder is None:
         return None
     if folder.resolve().is_relative_to(dataset_root.resolve()):
+        if cfg.store.cache == "auto":
+            return None              # a dataset holding the user's cache folder (e.g. the home): nothing kept
         raise cli.UserError(f"store.cache={cfg.store.cache}", f"is inside the dataset ({dataset_root}), which is "
                                                               "never written: name a folder outside it")
     existing = next(p for p in (folder, *folder.parents) if p.exists())
@@ -363,6 +365,7 @@ def _write_outputs(out_dir: Path, row: dict, arrays: dict | bytes | None, grid: 
 
 def _add_arrays(path: Path, stem: str, arrays: dict | bytes | None, attrs: dict, store: Store | None,
                 key: str | None) -> None:
+    """A capture's arrays into arrays.h5 as group `stem` (bench.harness.store.write_arrays' layout)."""
     if store is not None:      # compressed once, into the store
         store.copy_arrays(key, path, stem, attrs)
     elif isinstance(arrays, bytes):

@@ -124,10 +124,15 @@ def test_a_bad_kept_file_is_ignored_with_a_warning_and_made_anew(synth_root, tmp
     _same_scores(first, third)
 
 
-def test_a_cache_inside_the_dataset_is_refused(synth_root, tmp_path):
+def test_a_cache_inside_the_dataset_is_refused(synth_root, tmp_path, counted, monkeypatch):
     with pytest.raises(cli.UserError, match="inside the dataset"):
         app.run(_cfg(synth_root, synth_root / "01_plate" / "cache"), tmp_path / "run")
     assert not (synth_root / "01_plate" / "cache").exists()
+    casts, _, fresh = counted
+    monkeypatch.setenv("XDG_CACHE_HOME", str(synth_root / "xdg"))                 # auto: nothing kept, no error
+    fresh()
+    app.run(_cfg(synth_root, "auto"), tmp_path / "auto")
+    assert len(casts) == 1 and not (synth_root / "xdg").exists()
 
 
 def test_auto_keeps_in_the_users_cache_folder_and_an_unwritable_one_keeps_nothing(synth_root, tmp_path, counted,
