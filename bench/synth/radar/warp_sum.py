@@ -37,6 +37,19 @@ def _warp():
         return wp, warp_kernels
 
 
+def start() -> None:
+    """Import and initialise Warp and the kernels now (a device server starts them while its workers get going)."""
+    _warp()
+
+
+_delegate: list = []     # set in worker processes: the function that sums a frame in the process holding the device
+
+
+def delegate(function) -> None:
+    """Have `frame(...)` computed by `function(*its arguments)` from now on (bench.synth.radar.remote.connect)."""
+    _delegate[:] = [function]
+
+
 @dataclass(frozen=True)
 class Side:
     """One side of every row: the point its legs leave (K, 3) m, the lobe axis (K, 3) (unit vectors) and half-width
@@ -78,6 +91,8 @@ def frame(rows: Rows, positions: np.ndarray, rx_m: np.ndarray, tx_m: np.ndarray,
           device: str) -> np.ndarray:
     """The frame (n_rx, n_tx, F) complex64 of `rows` on `device`; `positions` (K, D) places the rows for blocking
     (as bench.synth.radar.leg_sum.leg_sum)."""
+    if _delegate:
+        return _delegate[0](rows, positions, rx_m, tx_m, freqs_hz, device)
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     total = _DeviceFrame(rows, np.concatenate([rx_m, tx_m]), len(rx_m), freqs_hz, WARP_DEVICES[device])
     for block in leg_sum.compact_blocks(np.asarray(positions, dtype=np.float64), leg_sum.BLOCK_ROWS):
