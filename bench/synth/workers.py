@@ -1,6 +1,6 @@
 """Where a catalogue's captures are built: worker processes, or threads of this process.
 
-A capture is built in parts (generate.CAPTURE_PARTS: radar, camera, ground truth) that each draw from their own
+A capture is built in parts (bench.synth.parts.CAPTURE_PARTS: radar, camera, ground truth) that each draw from their own
 seeded streams and write their own files, so the parts of all captures are independent tasks. Their CPU stages (ray
 casting, depth camera, mesh smoothing, file encoding) hold the interpreter for much of their time: threads of one
 process take turns (8 capture threads used ~4 of a 16-core host), processes do not. Workers are forked from a
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import multiprocessing.forkserver
 import os
 import sys
 from collections.abc import Callable, Iterator
@@ -22,7 +23,9 @@ from threadpoolctl import threadpool_limits
 from bench.synth.radar import leg_sum, remote
 
 MIN_CORES_FOR_PROCESSES = 4     # below this, threads: a worker's start (imports: ~1 s of a core) is not won back
-PRELOAD = ["bench.synth.generate"]     # what each worker needs, imported once by the forkserver
+START_METHOD = "forkserver"
+PRELOAD = ["bench.synth.parts", "bench.synth.camera.depth"]     # what a worker needs (Open3D too), imported once
+                                                               # by the forkserver
 
 
 def cores() -> int:
@@ -44,7 +47,15 @@ def capture_processes() -> bool:
     main = sys.modules.get("__main__")
     safe_main = getattr(main, "__spec__", None) is not None or getattr(main, "__file__", None) is None
     return (safe_main and cores() >= MIN_CORES_FOR_PROCESSES
-            and "forkserver" in multiprocessing.get_all_start_methods())
+            and START_METHOD in multiprocessing.get_all_start_methods())
+
+
+def prestart() -> None:
+    """Start the forkserver and its imports now, where parts will be built in processes: they then overlap what this
+    process does first (its own imports, starting the device)."""
+    if capture_processes() and START_METHOD == "forkserver":
+        multiprocessing.get_context("forkserver").set_forkserver_preload(PRELOAD)
+        multiprocessing.forkserver.ensure_running()
 
 
 @contextlib.contextmanager
@@ -55,8 +66,9 @@ def builders(count: int, device: str) -> Iterator[Callable[..., Future]]:
         with ThreadPoolExecutor(count, thread_name_prefix="capture") as pool:
             yield pool.submit
         return
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(PRELOAD)
+    context = multiprocessing.get_context(START_METHOD)
+    if START_METHOD == "forkserver":
+        context.set_forkserver_preload(PRELOAD)
     with contextlib.ExitStack() as stack:
         server = stack.enter_context(remote.DeviceServer()) if device != "cpu" else None
         threads = max(leg_sum.PARTIAL_SUMS, cores() // count)     # the cores shared out among the workers' sums
