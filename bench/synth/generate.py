@@ -180,8 +180,9 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
     the radar sums on `device` (ensure_capture).
 
     Holds the root's lock throughout: a concurrent call waits (`on_wait()` is called once when it has to) and
-    then finds the captures cached. Builds `capture_workers()` captures at once (threads; every capture draws from
-    its own seeded streams and sums in a fixed order, so its files do not depend on this); `log` sees them in order.
+    then finds the captures cached. Builds the captures' parts (parts.CAPTURE_PARTS), `workers.capture_workers()`
+    at once, in worker processes or threads (bench.synth.workers; every part draws from its own seeded streams and
+    sums in a fixed order, so the files do not depend on this); `log` sees the captures in order.
     Raises ownership.ForeignRootError for a root with other data.
     """
     pairs = [(o, int(d)) for o in (list(objects) if objects is not None else list(CATALOGUE)) for d in distances]

@@ -23,7 +23,7 @@ from threadpoolctl import threadpool_limits
 from bench.synth.radar import leg_sum, remote
 
 MIN_CORES_FOR_PROCESSES = 4     # below this, threads: a worker's start (imports: ~1 s of a core) is not won back
-START_METHOD = "forkserver"
+START_METHOD = "forkserver"    # not fork (this process may hold CUDA), not spawn (each worker would import all)
 PRELOAD = ["bench.synth.parts", "bench.synth.camera.depth"]     # what a worker needs (Open3D too), imported once
                                                                # by the forkserver
 
@@ -47,6 +47,7 @@ def capture_processes() -> bool:
     main = sys.modules.get("__main__")
     safe_main = getattr(main, "__spec__", None) is not None or getattr(main, "__file__", None) is None
     return (safe_main and cores() >= MIN_CORES_FOR_PROCESSES
+            and not multiprocessing.current_process().daemon        # a daemonic process may not have children
             and START_METHOD in multiprocessing.get_all_start_methods())
 
 

@@ -27,14 +27,21 @@ def _contents(root):
     return {k: v["content"] for k, v in json.loads((root / "synth_manifest.json").read_text())["captures"].items()}
 
 
-@pytest.mark.parametrize("start_method", ["spawn", "forkserver"])
-def test_parts_built_in_worker_processes_are_the_files_built_in_this_process(tmp_path, monkeypatch, start_method):
+def test_parts_built_in_worker_processes_are_the_files_built_in_this_process(tmp_path, monkeypatch):
     """The realistic preset (every effect, multipath) at 16 frequencies: worker processes against one thread."""
     config = dataclasses.replace(preset("realistic"), frequency_points=16)
-    monkeypatch.setattr(workers, "START_METHOD", start_method)
+    submitted = []
+
+    class Counting(workers.ProcessPoolExecutor):
+        def submit(self, *args, **kwargs):
+            submitted.append(args[1:3])
+            return super().submit(*args, **kwargs)
+
+    monkeypatch.setattr(workers, "ProcessPoolExecutor", Counting)
     monkeypatch.setattr(workers, "capture_processes", lambda: True)
     monkeypatch.setattr(workers, "capture_workers", lambda: 3)
     built = generate_catalogue(tmp_path / "processes", [30], OBJECTS, config)
+    assert len(submitted) == 2 * 3                           # every part of both captures went to a worker process
     monkeypatch.setattr(workers, "capture_processes", lambda: False)
     monkeypatch.setattr(workers, "capture_workers", lambda: 1)
     generate_catalogue(tmp_path / "thread", [30], OBJECTS, config)
