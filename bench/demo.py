@@ -22,14 +22,16 @@ import shutil
 import sys
 import time
 from pathlib import Path
-
-import pandas as pd
-from omegaconf import OmegaConf
+from typing import TYPE_CHECKING
 
 from bench import cli
 from bench.harness import CONFIG_DIR
 from bench.progress import Heartbeat, run_relayed
-from bench.report import agreement, tables
+
+if TYPE_CHECKING:
+    import pandas as pd
+# pandas, OmegaConf and the report's tables are imported where they are used: the report's picture workers are
+# spawned processes, which import this module again (as their __main__), and those imports cost each ~1 s of CPU.
 
 EXPERIMENTS = ("table2", "table3")
 # Runtimes: the median of the calls per capture that fit in 1.2 s, at most 3 (app._reconstruct's rule): 3 for a call
@@ -52,6 +54,8 @@ class SweepFailed(Exception):
 
 def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]:
     """(objects, distances in cm) of the demo: configs/dataset/synthetic.yaml's, the distances replaced when given."""
+    from omegaconf import OmegaConf
+
     from bench.synth import CATALOGUE
 
     settings = OmegaConf.load(CONFIG_DIR / "dataset" / "synthetic.yaml").generate
@@ -64,6 +68,7 @@ def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]
 GENERATE_S_PER_CAPTURE = 2.6
 SWEEP_S_PER_CAPTURE = {"table2": 1.9, "table3": 18.4}
 BP_MAX_S_PER_CAPTURE = 6.7           # table3's longest cell
+REPORT_S_PER_CAPTURE = 0.8           # the report page, table3's pictures drawn anew (docs/measurements/sweep.md)
 
 
 def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
@@ -74,13 +79,14 @@ def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
     missing = sum(not (root / o / str(d)).is_dir() for o in objects for d in distances)
     stored = store.is_dir() and any((store / "cells").glob("*.json"))
     sweeps_s = {name: n * s for name, s in SWEEP_S_PER_CAPTURE.items()}
-    total_s = missing * GENERATE_S_PER_CAPTURE + sum(sweeps_s.values())
+    total_s = missing * GENERATE_S_PER_CAPTURE + sum(sweeps_s.values()) + n * REPORT_S_PER_CAPTURE
     steps = [f"generating {missing} of {n} captures ~{missing * GENERATE_S_PER_CAPTURE:.0f} s" if missing
              else f"the {n} captures are on disk"]
     steps += [f"{name} ~{seconds:.0f} s" for name, seconds in sweeps_s.items()]
+    steps.append(f"the report ~{n * REPORT_S_PER_CAPTURE:.0f} s")
     text = (f"demo: about {total_s / 60:.0f} min on two quiet cores ({', '.join(steps)}); the long step is "
             f"table3's BP_max (~{n * BP_MAX_S_PER_CAPTURE:.0f} s, one back-projection over 128 frequencies per "
-            f"capture), then the report's pictures (~20 s when drawn anew)")
+            f"capture)")
     if stored:
         text += f"; cells already in {store} are reused, so this run may take much less"
     return text
@@ -132,6 +138,8 @@ def sweep(experiment: str, root: Path, out: Path, store: Path, synth: str = "rea
     stderr is passed through and its tail kept, so a failure ends in the job's own reason (SweepFailed).
     `distances_cm`: only the demo's captures at these distances (default: the dataset config's); `depth_errors`:
     the sweep root also gets depth_errors/<capture>.png (what --update-results publishes)."""
+    import pandas as pd
+
     objects, distances = demo_captures(distances_cm)
     captures = ",".join(f"{name}/{distance}" for name in objects for distance in distances)
     command = [sys.executable, "-m", "bench", "-m", f"experiment={experiment}", f"hydra/launcher={LAUNCHER}",
@@ -168,7 +176,7 @@ def publish(sweep_root: Path, rows: pd.DataFrame, table: str, results: Path) -> 
 
 def report_page(out: Path) -> Path:
     """`out/report.html` (bench.report.html) over the demo's sweep roots; pictures for table3, which holds every method
-    (they cost several seconds per capture and cell)."""
+    (about 1 s of CPU per capture, drawn by one spawned process per core)."""
     from bench.report import html
 
     return html.write_report([out / name for name in EXPERIMENTS], out / "report.html",
@@ -177,6 +185,8 @@ def report_page(out: Path) -> Path:
 
 def write_table1(folder: Path) -> str:
     """Table I as `folder/table1.csv` and `.md`; returns its Markdown."""
+    from bench.report import tables
+
     table1 = tables.table1()
     folder.mkdir(parents=True, exist_ok=True)
     table1.to_csv(folder / "table1.csv", index=False, float_format="%.4f")
@@ -185,6 +195,10 @@ def write_table1(folder: Path) -> str:
 
 
 def main() -> int:
+    import pandas as pd
+
+    from bench.report import agreement, tables
+
     parser = cli.ArgumentParser(prog="python -m bench.demo", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--root", type=Path, default=Path("data/synthetic"), help="synthetic dataset root")

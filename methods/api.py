@@ -22,7 +22,7 @@ import numpy as np
 from methods.backends import backend_for
 from methods.backends.base import Backend
 from methods.domain.capture import Capture, RadarGrid
-from methods.domain.errors import UsageError
+from methods.domain.errors import NonFiniteSignal, UsageError
 from methods.fsk import DEFAULT_PRIOR_M
 from methods.method import SENSOR_PRIORS, Frame, Method
 from methods.ops.filtering import DEFAULT_THRESHOLD_DB
@@ -113,11 +113,26 @@ def _selected(freqs_key: bytes, targets_ghz: tuple[float, ...]) -> np.ndarray:
 
 def _check_frequencies_hz(capture: Capture, freqs_hz: np.ndarray) -> None:
     """Refuse a frequency vector that is not finite or not in Hz (e.g. in GHz)."""
+    problem = _frequency_problem(freqs_hz.tobytes())
+    if problem is not None:
+        raise UsageError(problem.format(name=capture.name))
+
+
+@functools.lru_cache(maxsize=64)
+def _frequency_problem(freqs_key: bytes) -> str | None:
+    """What is wrong with a float64 frequency vector (its bytes), a message with {name} for the capture, or None;
+    looked up once per vector (four reductions cost ~15 us of a fresh-frame call on the H100's host)."""
+    freqs_hz = np.frombuffer(freqs_key, dtype=np.float64)
     if freqs_hz.size == 0:
-        raise UsageError(f"capture {capture.name} has no frequencies")
+        return "capture {name} has no frequencies"
     if not np.all(np.isfinite(freqs_hz)) or freqs_hz.min() < 1e9:
-        raise UsageError(f"the frequencies of capture {capture.name} must be finite and in Hz (>= 1 GHz), found "
-                         f"{freqs_hz.min():g}-{freqs_hz.max():g} (in GHz? multiply by 1e9)")
+        return (f"the frequencies of capture {{name}} must be finite and in Hz (>= 1 GHz), found "
+                f"{freqs_hz.min():g}-{freqs_hz.max():g} (in GHz? multiply by 1e9)")
+    return None
+
+
+def _nonfinite_signal(capture: Capture) -> UsageError:
+    return UsageError(f"the radar frame of capture {capture.name} has NaN or Inf samples")
 
 
 def _check_signal(capture: Capture, signal: np.ndarray) -> None:
@@ -125,7 +140,23 @@ def _check_signal(capture: Capture, signal: np.ndarray) -> None:
     proves every sample finite (NaN and Inf propagate); only a sum that is not finite (a NaN, an Inf, or an overflow
     of finite samples) pays the element-wise check."""
     if not np.isfinite(signal.sum()) and not np.all(np.isfinite(signal)):
-        raise UsageError(f"the radar frame of capture {capture.name} has NaN or Inf samples")
+        raise _nonfinite_signal(capture)
+
+
+def _device_checks(backend: Backend, signal: np.ndarray) -> bool:
+    """Whether the backend checks this frame's samples for NaN/Inf itself when it uploads them (`checks_samples`:
+    Warp on CUDA, BP_max's 9 MB frame, whose host sum cost ~1 ms a call), raising NonFiniteSignal."""
+    checks = getattr(backend, "checks_samples", None)
+    return checks is not None and checks(signal)
+
+
+def _any_valid(depth_m: np.ndarray) -> bool:
+    """Whether some depth is finite: a NaN-skipping maximum that is finite proves it (one pass, no mask), else the
+    element-wise test."""
+    depth_m = np.asarray(depth_m)
+    if depth_m.size and depth_m.dtype.kind == "f" and np.isfinite(np.fmax.reduce(depth_m, axis=None)):
+        return True
+    return bool(np.isfinite(depth_m).any())
 
 
 def _no_pixel_reason(capture: Capture, grid: RadarGrid, region: Roi, signal: np.ndarray,
@@ -161,6 +192,28 @@ def _capture_roi(grid: RadarGrid, bounds: tuple[tuple[str, float], ...], mask_bb
         roi = intersect(roi, roi_from_mask_bb({k: v for k, v in bounds if k[0] == "z"}, grid))
     roi.pixels.flags.writeable = False
     return roi
+
+
+def _run(capture: Capture, method: Method, signal: np.ndarray, freqs_hz: np.ndarray, prior_value, backend: Backend,
+         grid: RadarGrid, skips: SkipSettings, threshold_db: float | None, scalar_prior_m: float,
+         prior_options: dict | None) -> tuple[Reconstruction, object]:
+    """Warm-up, prior and `method.run` of `reconstruct` (the result and the prior it ran with)."""
+    antennas = capture.antennas
+    backend.warm_up(signal, freqs_hz, antennas.tx_m, antennas.rx_m, volume=method.uses_volume,
+                    prior=method.device_prior)
+    timer = StageTimer()
+    region = capture_roi(capture, grid, skips)
+    if prior_value in SENSOR_PRIORS:
+        with timer.stage("prior"):
+            run_prior = prior_image_m(capture, prior_value, grid, backend, keep_on_device=method.device_prior,
+                                      **(prior_options or {}))
+    elif prior_value is None and "none" not in method.priors:
+        run_prior = scalar_prior_m          # a method of scalar priors starts from the default one
+    else:
+        run_prior = prior_value
+    result = method.run(Frame(signal, freqs_hz, antennas, grid, region, skips, threshold_db, capture.name),
+                        run_prior, backend, timer)
+    return result, run_prior
 
 
 def reconstruct(capture: Capture, method: str | type | Method, freq: str | Sequence[float] | None,
@@ -200,29 +253,26 @@ def reconstruct(capture: Capture, method: str | type | Method, freq: str | Seque
         signal = np.ascontiguousarray(frame.signal)      # every frequency (BP_max): the frame itself, not a copy
     else:
         signal = np.take(frame.signal, indices, axis=2)  # a new C-contiguous array: ~3x faster than fancy indexing
-    _check_signal(capture, signal)
+    device_checks = _device_checks(backend, signal)
+    if not device_checks:
+        _check_signal(capture, signal)
     freqs_hz = frame.freqs_hz[indices]
-    antennas = capture.antennas
-    backend.warm_up(signal, freqs_hz, antennas.tx_m, antennas.rx_m, volume=method.uses_volume,
-                    prior=method.device_prior)
-
-    timer = StageTimer()
-    region = capture_roi(capture, grid, skips)
-    if prior_value in SENSOR_PRIORS:
-        with timer.stage("prior"):
-            run_prior = prior_image_m(capture, prior_value, grid, backend, keep_on_device=method.device_prior,
-                                      **(prior_options or {}))
-    elif prior_value is None and "none" not in method.priors:
-        run_prior = scalar_prior_m          # a method of scalar priors starts from the default one
-    else:
-        run_prior = prior_value
-    result = method.run(Frame(signal, freqs_hz, antennas, grid, region, skips, threshold_db, capture.name),
-                        run_prior, backend, timer)
+    try:
+        result, run_prior = _run(capture, method, signal, freqs_hz, prior_value, backend, grid, skips, threshold_db,
+                                 scalar_prior_m, prior_options)
+    except NonFiniteSignal:                 # the backend's check (`_device_checks`)
+        raise _nonfinite_signal(capture) from None
+    except Exception:
+        if device_checks and not backend.samples_checked(signal):
+            _check_signal(capture, signal)
+        raise
+    if device_checks and not backend.samples_checked(signal):     # a method that never uploaded the frame
+        _check_signal(capture, signal)
     # an explicit all-invalid result; counted after the run (a deferred device prior is built by the method)
     if prior_value in SENSOR_PRIORS and not run_prior.n_covered:
         invalid_reason = f"the {prior_value} prior of capture {capture.name} covers no radar pixel"
-    if invalid_reason is None and not result.valid.any():
-        invalid_reason = _no_pixel_reason(capture, grid, region, signal, threshold_db)
+    if invalid_reason is None and not _any_valid(result.depth_m):
+        invalid_reason = _no_pixel_reason(capture, grid, capture_roi(capture, grid, skips), signal, threshold_db)
     result.extra.update(freq=freq, prior=prior)
     result.device, result.invalid_reason = backend.name, invalid_reason
     return result

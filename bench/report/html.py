@@ -11,7 +11,7 @@ clouds over the ground truth, depth / magnitude / signed-error panels; PLY files
 Hydra overrides, full configuration, code version, device and host. Images are files beside the page (linked by
 relative paths: keep the page with its sweep roots), so the page stays small; nothing is loaded from the network.
 Default output: `SWEEP_ROOT/report.html` (one root) or `report.html` in the roots' common folder. Pictures are
-written under `SWEEP_ROOT/pictures/` (several seconds per capture; `--no-pictures` leaves them out); pictures,
+written under `SWEEP_ROOT/pictures/` (about 1 s of CPU per capture; `--no-pictures` leaves them out); pictures,
 plots and the page are redrawn only when their inputs changed (bench.report.keyed).
 """
 from __future__ import annotations
@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import html
 import os
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -217,6 +218,7 @@ def _pictures_section(root: Path, page_dir: Path) -> str:
             runs.append((tables.job_label(job / "results.csv"), job / "arrays.h5"))
     if not runs:
         return "<p>No job wrote arrays.h5: no pictures.</p>"
+    pictures.probe_renderer()         # its child process runs beside the reading of the priors
     stems = pictures.capture_stems([path for _, path in runs])
     written = pictures.sweep_pictures(runs, root / "pictures", _realsense_priors(root, stems))
     blocks = []
@@ -259,8 +261,10 @@ def verdict_section(roots: list[Path], scored: dict[Path, Scored] | None = None)
     return "\n".join(parts)
 
 
-def root_section(root: Path, pictures: bool, page_dir: Path, scored: Scored | None = None) -> tuple[str, str]:
-    """(table name, HTML section) of one sweep root; images linked relative to `page_dir`."""
+def root_section(root: Path, pictures: Future | None, page_dir: Path, scored: Scored | None = None
+                 ) -> tuple[str, str]:
+    """(table name, HTML section) of one sweep root; images linked relative to `page_dir`. `pictures`: the
+    section of its pictures being drawn (`_pictures_section` in a thread of write_report), or None."""
     from bench.report import merge, tables
 
     scored = scored or Scored.of(_rows(root))
@@ -276,8 +280,8 @@ def root_section(root: Path, pictures: bool, page_dir: Path, scored: Scored | No
              _html_table(spread(rows, scored)),
              "<h3>Per object: P (cm)</h3>", _html_table(per_object(rows, scored=scored)),
              "<h3>Runtime against error</h3>", _image(plot, f"{name} runtime against error", page_dir)]
-    if pictures:
-        parts += ["<h3>Pictures per capture</h3>", _pictures_section(root, page_dir)]
+    if pictures is not None:
+        parts += ["<h3>Pictures per capture</h3>", pictures.result()]
     parts += ["<h3>Cells: configuration and code version</h3>", _cells_section(root, rows)]
     return name, "\n".join(parts)
 
@@ -286,10 +290,14 @@ def write_report(roots: list[Path], out: Path, pictures: bool | list[Path] = Tru
     """The HTML page of the sweep roots at `out` (written atomically, and only when its text changed); returns
     `out`. `pictures`: for every root (True), none (False) or the roots listed."""
     chosen = [Path(p).resolve() for p in pictures] if isinstance(pictures, list) else None
+    drawn = [root for root in roots if (bool(pictures) if chosen is None else root.resolve() in chosen)]
     page_dir = out.parent.resolve()
-    scored = {root: Scored.of(_rows(root)) for root in roots}
-    sections = [root_section(root, bool(pictures) if chosen is None else root.resolve() in chosen, page_dir,
-                             scored[root]) for root in roots]
+    # The pictures (drawn by worker processes, bench.report.pictures) are started first, in a thread that mostly
+    # waits for them, so that the tables are scored meanwhile rather than before.
+    with ThreadPoolExecutor(1) as drawing:
+        sections_of_pictures = {root: drawing.submit(_pictures_section, root, page_dir) for root in drawn}
+        scored = {root: Scored.of(_rows(root)) for root in roots}
+        sections = [root_section(root, sections_of_pictures.get(root), page_dir, scored[root]) for root in roots]
     nav = " ".join(f"<a href='#{html.escape(name)}'>{html.escape(name)}</a>" for name, _ in sections)
     page = (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>mm2fsk-bench report</title>"
             f"<style>{_STYLE}</style></head><body><h1>mm2fsk-bench report</h1>"

@@ -8,8 +8,8 @@ capture's metric grid):
   relative to the capture's strongest pixel (the quantity the -14 dB filter thresholds, as in the paper), the
   ground-truth surface (the mesh rasterised on the same grid) is drawn in grey beneath them. The perspective view
   comes from Open3D's offscreen renderer where it runs (it needs a Vulkan driver, e.g. Debian's
-  `mesa-vulkan-drivers`), else from matplotlib, projecting the points through the same camera (chosen at run time,
-  `renderer()`); side and top views are orthographic projections drawn by matplotlib, with axes in cm.
+  `mesa-vulkan-drivers`), else from a z-buffered splat of the points projected through the same camera (chosen at
+  run time, `renderer()`); side and top views are orthographic splats, with axes in cm.
 * `point_clouds/<stem>/<cell>.ply` (radar points, magnitude colours) and `<stem>/ground_truth.ply`: metres, radar
   space (x right, y up, z away from the array).
 * `panels/<stem>.png`: ground truth and (where the dataset can be read) the RealSense prior, then one row per cell:
@@ -17,8 +17,9 @@ capture's metric grid):
   blue = in front), "no depth" in grey and depth where there is no ground truth in black; every map on the same
   window, one colour bar per quantity beside the legend.
 
-The figures have fixed layouts (margins in inches): about half the CPU of matplotlib's constrained layout, which
-measured every tick label twice (docs/measurements/sweep.md, 2026-11-26 04:30).
+Both figures are drawn straight into pixels (bench.report.sheet: every view an array, one canvas, matplotlib's
+font, tick positions and colour maps): about a tenth of the CPU of matplotlib axes, whose ticks, title layout and
+per-point scatter paths cost 4-5 s per capture (docs/measurements/sweep.md, 2026-11-26 06:40).
 """
 from __future__ import annotations
 
@@ -32,15 +33,10 @@ from pathlib import Path
 
 import h5py
 import matplotlib
+import numpy as np
+from PIL import Image
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after choosing the file-only backend)
-import numpy as np  # noqa: E402
-from matplotlib.colors import ListedColormap  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
-
-from bench.report import keyed  # noqa: E402
+from bench.report import keyed, sheet
 
 SIGNED_ERROR_LIMIT_CM = 2.0      # colour range of the signed error: +-2 cm, beyond saturates (arrows on the bar)
 MAGNITUDE_RANGE_DB = 20.0        # magnitude colours span the strongest pixel down to -20 dB (the filter keeps -14)
@@ -48,7 +44,11 @@ NO_DEPTH_COLOUR = "#9a9a9a"      # grey: distinct from white (zero error) and fr
 NO_TRUTH_COLOUR = "#000000"      # black: the method returned depth where the ground truth has no surface
 GT_COLOUR = "#b8b8b8"
 CELLS_PER_ROW = 4                # point-cloud columns per row of a figure: about 1200 px wide, legible in a browser
-RENDERERS = ("open3d", "matplotlib")
+RENDERERS = ("open3d", "splat")
+POINT_CLOUD_DPI, PANEL_DPI = 100, 90
+# Dots of 3 x 3 pixels (radar) and 5 pixels (a cross; the ground truth beneath): what matplotlib's scatter markers
+# (s = 0.2-0.6 pt^2 and a 1.5 pt edge, ~2-2.3 pt across) covered at 100 dpi.
+RADAR_RADIUS_PX, GT_RADIUS_PX = 1.5, 1.0
 _PROBE = """
 import numpy as np, open3d as o3d
 r = o3d.visualization.rendering.OffscreenRenderer(32, 32)
@@ -115,46 +115,74 @@ def _magnitude_colours(cell: CaptureArrays, index: np.ndarray) -> tuple[np.ndarr
     values = np.abs(cell.magnitude[index[:, 0], index[:, 1]])
     reference = values.max() if values.size and values.max() > 0 else 1.0
     level_db = np.clip(magnitude_db(values, reference), -MAGNITUDE_RANGE_DB, 0.0)
-    return level_db, plt.get_cmap("plasma")((level_db + MAGNITUDE_RANGE_DB) / MAGNITUDE_RANGE_DB)[:, :3]
+    return level_db, matplotlib.colormaps["plasma"]((level_db + MAGNITUDE_RANGE_DB) / MAGNITUDE_RANGE_DB)[:, :3]
 
 
 def write_ply(path: Path, points: np.ndarray, colours: np.ndarray | None = None) -> Path:
-    """A point cloud in metres (and RGB colours 0..1) as binary PLY (Open3D)."""
-    import open3d as o3d
-
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
+    """A point cloud in metres (and RGB colours 0..1) as binary little-endian PLY in Open3D's layout: x, y, z as
+    doubles, then red, green, blue as bytes (rounded half up, as Open3D writes them). Written here rather than by
+    Open3D, whose import costs ~0.6 s per drawing process and which refuses a cloud of no points."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    fields, header = [("xyz", "<f8", (3,))], [f"property double {axis}" for axis in "xyz"]
     if colours is not None:
-        cloud.colors = o3d.utility.Vector3dVector(np.asarray(colours, np.float64))
+        fields.append(("rgb", "u1", (3,)))
+        header += [f"property uchar {channel}" for channel in ("red", "green", "blue")]
+    records = np.empty(len(points), dtype=fields)
+    records["xyz"] = points
+    if colours is not None:
+        records["rgb"] = np.floor(np.clip(np.asarray(colours, np.float64), 0.0, 1.0) * 255.0 + 0.5)
+    header = ["ply", "format binary_little_endian 1.0", "comment Created by mm2fsk-bench",
+              f"element vertex {len(points)}", *header, "end_header", ""]
     path.parent.mkdir(parents=True, exist_ok=True)
-    if not o3d.io.write_point_cloud(str(path), cloud):
-        raise OSError(f"{path}: Open3D could not write the point cloud")
+    path.write_bytes("\n".join(header).encode("ascii") + records.tobytes())
     return path
 
 
 @functools.lru_cache(maxsize=1)
-def _open3d_renders() -> bool:
-    """Whether Open3D's offscreen renderer runs here, probed in a child process (a missing driver can abort it)."""
+def _probe() -> subprocess.Popen | None:
+    """The child process probing Open3D's offscreen renderer (a missing driver can abort it), started once per
+    process; None where it cannot start."""
     try:
-        probe = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, timeout=120)
-    except (OSError, subprocess.TimeoutExpired):
+        return subprocess.Popen([sys.executable, "-c", _PROBE], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+def probe_renderer() -> None:
+    """Start the renderer's probe now, so that it runs beside what this process does before drawing (about 0.6 s
+    of another core: it imports Open3D)."""
+    if os.environ.get("BENCH_RENDERER", "").strip().lower() != "splat":
+        _probe()
+
+
+@functools.lru_cache(maxsize=1)
+def _open3d_renders() -> bool:
+    """Whether Open3D's offscreen renderer runs here (the probe's verdict, waited for)."""
+    probe = _probe()
+    if probe is None:
         return False
-    return probe.returncode == 0
+    try:
+        return probe.wait(timeout=120) == 0
+    except subprocess.TimeoutExpired:
+        probe.kill()
+        probe.wait()
+        return False
 
 
 def renderer() -> str:
-    """'open3d' where its offscreen renderer runs, else 'matplotlib'; `BENCH_RENDERER=open3d|matplotlib` forces
-    one (open3d where it cannot run is an error, not a silent fallback)."""
+    """'open3d' where its offscreen renderer runs, else 'splat'; `BENCH_RENDERER=open3d|splat` forces one (open3d
+    where it cannot run is an error, not a silent fallback)."""
     forced = os.environ.get("BENCH_RENDERER", "").strip().lower()
     if forced and forced not in RENDERERS:
         raise ValueError(f"BENCH_RENDERER={forced!r}: choose one of {', '.join(RENDERERS)}")
-    if forced == "matplotlib":
+    if forced == "splat":
         return forced
     if _open3d_renders():
         return "open3d"
     if forced == "open3d":
         raise RuntimeError("BENCH_RENDERER=open3d, but Open3D's offscreen renderer does not run here (it needs a "
                            "Vulkan driver, e.g. apt-get install libvulkan1 mesa-vulkan-drivers)")
-    return "matplotlib"
+    return "splat"
 
 
 def _perspective_camera(gt_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -228,96 +256,113 @@ def project(points: np.ndarray, centre: np.ndarray, eye: np.ndarray) -> tuple[np
     return np.column_stack([relative @ right, relative @ up]) / depth[:, None], depth
 
 
-def _draw_perspective_matplotlib(ax, points: np.ndarray, colours: np.ndarray, gt_points: np.ndarray) -> None:
-    """The perspective view of render_open3d (same camera) drawn by matplotlib on 2D axes: the ground truth (grey),
-    then the radar points over it, each painted far to near. (2D axes: matplotlib's 3D axes cost about a third of
-    the figure.)"""
+def _rgb8(colours: np.ndarray) -> np.ndarray:
+    """RGB colours 0..1 as uint8."""
+    return np.round(np.asarray(colours, np.float64) * 255).astype(np.uint8)
+
+
+def _blank(box: sheet.Box) -> np.ndarray:
+    return np.full((box.height, box.width, 3), 255, np.uint8)
+
+
+def _equal_window(lo: np.ndarray, hi: np.ndarray, aspect: float, margin: float = 0.05
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The window (lo, hi) around the (x, y) range lo..hi plus `margin` of it on each side, widened along one axis so
+    that width / height = `aspect` (equal scales, centred)."""
+    span = np.maximum(hi - lo, 1e-9) * (1 + 2 * margin)
+    span = np.maximum(span, [span[1] * aspect, span[0] / aspect])
+    middle = (lo + hi) / 2
+    return middle - span / 2, middle + span / 2
+
+
+def perspective_pixels(points: np.ndarray, colours: np.ndarray, gt_points: np.ndarray, box: sheet.Box) -> np.ndarray:
+    """(box.height, box.width, 3) uint8: the perspective view of render_open3d's camera as a splat (`sheet.splat`):
+    the ground truth in grey, then the radar points over it (RGB 0..1 `colours`), nearer points over farther ones
+    within each, on equal scales with a margin of 5 % around every point."""
     centre, eye = _perspective_camera(gt_points)
-    for xyz, rgb, size in ((gt_points, np.array([matplotlib.colors.to_rgb(GT_COLOUR)]), 0.2),
-                           (points, colours, 0.6)):
-        if len(xyz):
-            plane, depth = project(xyz, centre, eye)
-            order = np.argsort(-depth, kind="stable")
-            ax.scatter(plane[order, 0], plane[order, 1], s=size, c=rgb if len(rgb) == 1 else rgb[order],
-                       rasterized=True)
-    ax.set_aspect("equal")
-    ax.set_axis_off()
+    grey = _rgb8([matplotlib.colors.to_rgb(GT_COLOUR)])
+    layers = [(*project(xyz, centre, eye), rgb, radius)
+              for xyz, rgb, radius in ((gt_points, np.repeat(grey, len(gt_points), 0), GT_RADIUS_PX),
+                                       (points, _rgb8(colours), RADAR_RADIUS_PX)) if len(xyz)]
+    tile = _blank(box)
+    if not layers:
+        return tile
+    plane = np.vstack([layer[0] for layer in layers])
+    lo, hi = _equal_window(plane.min(axis=0), plane.max(axis=0), box.width / box.height)
+    for xy, depth, rgb, radius in layers:
+        sheet.splat(tile, sheet.to_pixels(xy[:, 0], lo[0], hi[0], box.width),
+                    sheet.to_pixels(xy[:, 1], lo[1], hi[1], box.height, downwards=True), depth, rgb, radius)
+    return tile
 
 
-def _subsample(points: np.ndarray, *arrays: np.ndarray, at_most: int = 8000) -> tuple[np.ndarray, ...]:
-    """Every k-th point so that at most `at_most` are drawn (matplotlib scatter cost), same rows of `arrays`."""
-    step = max(1, -(-len(points) // at_most))
-    return (points[::step], *(a[::step] for a in arrays))
+def orthographic_pixels(layers: list[tuple[np.ndarray, np.ndarray, float]], axes: tuple[int, int], xlim: tuple,
+                        ylim: tuple, box: sheet.Box) -> np.ndarray:
+    """(box.height, box.width, 3) uint8: the (N, 3) point sets of `layers` ((points m, RGB uint8, dot radius px),
+    later layers over earlier ones) projected onto the coordinates `axes` (0 x, 1 y, 2 depth z) over the window
+    xlim x ylim (cm). Within a layer the point nearer the viewer wins, the viewer on the negative side of the third
+    coordinate (as the two axes lie: the side view (z, y) is seen from -x, the top view (x, z) from -y)."""
+    tile = _blank(box)
+    (across, up), along = axes, 3 - sum(axes)
+    for points, rgb, radius in layers:
+        if len(points):
+            sheet.splat(tile, sheet.to_pixels(100 * points[:, across], *xlim, box.width),
+                        sheet.to_pixels(100 * points[:, up], *ylim, box.height, downwards=True), points[:, along],
+                        rgb, radius)
+    return tile
 
 
 def point_cloud_figure(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path, ply_dir: Path | None = None,
                        use: str | None = None) -> Path:
     """Figs. 4-5 for one capture: per cell a perspective, side and top view of the radar points (magnitude
     colours) over the ground truth (grey), CELLS_PER_ROW cells side by side; writes PLY files into `ply_dir` when
-    given. `use`: the renderer of the
-    perspective view (default `renderer()`)."""
+    given. `use`: the renderer of the perspective view (default `renderer()`); the side and top views are splats
+    on axes in cm, the same window in every column."""
     use = use or renderer()
     truth = next(cell for _, cell in cells)
     gt_points, _ = points_m(truth.gt_depth_m, truth.x_m, truth.y_m)
+    gt_colours = np.tile(matplotlib.colors.to_rgb(GT_COLOUR), (len(gt_points), 1))
     if ply_dir is not None:
-        write_ply(ply_dir / stem / "ground_truth.ply", gt_points, np.tile(matplotlib.colors.to_rgb(GT_COLOUR),
-                                                                          (len(gt_points), 1)))
+        write_ply(ply_dir / stem / "ground_truth.ply", gt_points, gt_colours)
+    gt_layer = (gt_points, _rgb8(gt_colours), GT_RADIUS_PX)
     ncols = min(len(cells), CELLS_PER_ROW)
     blocks = -(-len(cells) // ncols)
-    width_in, height_in = 2.6 * ncols + 1.2, 8.4 * blocks
-    fig = plt.figure(figsize=(width_in, height_in))
-    grid = _fixed_grid(fig, 3 * blocks, ncols, left_in=0.6, right_in=1.1, top_in=0.75, bottom_in=0.7,
-                       hspace=0.45, wspace=0.12)
-    gt_shown = _subsample(gt_points)[0]
-    clouds = [points_m(c.depth_m, c.x_m, c.y_m)[0] for _, c in cells]
-    x_cm, y_cm, z_cm = (_window_cm(gt_points, clouds, axis) for axis in range(3))
-    for number, (label, cell) in enumerate(cells):
+    dpi = POINT_CLOUD_DPI
+    width, height = round((2.6 * ncols + 1.2) * dpi), round(8.4 * blocks * dpi)
+    page = sheet.Sheet(width, height, dpi)
+    boxes = sheet.grid(sheet.Box(round(0.6 * dpi), round(0.75 * dpi), width - round(1.7 * dpi),
+                                 height - round(1.45 * dpi)), 3 * blocks, ncols, hspace=0.45, wspace=0.12)
+    clouds = [points_m(c.depth_m, c.x_m, c.y_m) for _, c in cells]
+    x_cm, y_cm, z_cm = (_window_cm(gt_points, [points for points, _ in clouds], axis) for axis in range(3))
+    for number, ((label, cell), (points, index)) in enumerate(zip(cells, clouds, strict=True)):
         block, col = divmod(number, ncols)
-        points, index = points_m(cell.depth_m, cell.x_m, cell.y_m)
-        level_db, colours = _magnitude_colours(cell, index)
+        _, colours = _magnitude_colours(cell, index)
         if ply_dir is not None:
             write_ply(ply_dir / stem / f"{_file_name(label)}.ply", points, colours)
-        shown, shown_colours = _subsample(points, colours)
-        ax = fig.add_subplot(grid[3 * block, col])
+        view = boxes[3 * block][col]
         if use == "open3d":
-            ax.imshow(render_open3d(shown, shown_colours, gt_shown))
-            ax.set_axis_off()
+            view = view.fit(1.0)
+            rendered = Image.fromarray(render_open3d(points, colours, gt_points)).resize((view.width, view.height))
+            page.paste(np.asarray(rendered.convert("RGB")), view)
         else:
-            _draw_perspective_matplotlib(ax, shown, shown_colours, gt_shown)
-        ax.set_title(f"{label}\n{len(points)} points", fontsize=8)
-        side, top = fig.add_subplot(grid[3 * block + 1, col]), fig.add_subplot(grid[3 * block + 2, col])
-        side.scatter(gt_shown[:, 2] * 100, gt_shown[:, 1] * 100, s=0.3, c=GT_COLOUR, rasterized=True)
-        side.scatter(shown[:, 2] * 100, shown[:, 1] * 100, s=0.5, c=shown_colours, rasterized=True)
-        side.set(xlabel="z, depth (cm)", xlim=z_cm, ylim=y_cm, title="side view (array left)")
-        top.scatter(gt_shown[:, 0] * 100, gt_shown[:, 2] * 100, s=0.3, c=GT_COLOUR, rasterized=True)
-        top.scatter(shown[:, 0] * 100, shown[:, 2] * 100, s=0.5, c=shown_colours, rasterized=True)
-        top.set(xlabel="x (cm)", xlim=x_cm, ylim=z_cm, title="top view (array below)")
-        for view, ylabel in ((side, "y (cm)"), (top, "z, depth (cm)")):
-            view.title.set_fontsize(8)
-            view.tick_params(labelsize=7, labelleft=col == 0)   # every column has the same limits
-            view.xaxis.label.set_fontsize(7)
-            if col == 0:
-                view.set_ylabel(ylabel, fontsize=7)
-    bar = plt.cm.ScalarMappable(plt.Normalize(-MAGNITUDE_RANGE_DB, 0), cmap="plasma")
-    fig.colorbar(bar, cax=fig.add_axes((1 - 0.85 / width_in, 0.25, 0.15 / width_in, 0.5)),
-                 label="residual phasor magnitude (dB re strongest pixel)")
-    fig.legend(handles=[Patch(color=GT_COLOUR, label="ground truth")], loc="lower left", fontsize=8)
-    renderer_note = "Open3D offscreen" if use == "open3d" else "matplotlib"
-    fig.suptitle(f"{stem}: radar point clouds over the ground truth (grey), coloured by magnitude; "
-                 f"perspective view by {renderer_note}", fontsize=9, y=1 - 0.15 / height_in, va="top")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
-
-
-def _fixed_grid(fig, rows: int, cols: int, left_in: float, right_in: float, top_in: float, bottom_in: float,
-                hspace: float, wspace: float):
-    """A GridSpec over `fig` with margins in inches. The layout is fixed rather than constrained: matplotlib's
-    constrained layout measured every tick label of these figures twice and was about 40 % of their cost."""
-    width_in, height_in = fig.get_size_inches()
-    return fig.add_gridspec(rows, cols, left=left_in / width_in, right=1 - right_in / width_in,
-                            bottom=bottom_in / height_in, top=1 - top_in / height_in, hspace=hspace, wspace=wspace)
+            page.paste(perspective_pixels(points, colours, gt_points, view), view)
+        page.text((view.left + view.width / 2, view.top - page.px(sheet.TITLE_PAD_PT)),
+                  f"{label}\n{len(points)} points", 8, anchor="ms")
+        layers = [gt_layer, (points, _rgb8(colours), RADAR_RADIUS_PX)]
+        for row, axes, xlim, ylim, title, xlabel, ylabel in (
+                (1, (2, 1), z_cm, y_cm, "side view (array left)", "z, depth (cm)", "y (cm)"),
+                (2, (0, 2), x_cm, z_cm, "top view (array below)", "x (cm)", "z, depth (cm)")):
+            view = boxes[3 * block + row][col]
+            page.paste(orthographic_pixels(layers, axes, xlim, ylim, view), view)
+            page.axes(view, xlim, ylim, title=title, xlabel=xlabel, ylabel=ylabel if col == 0 else None,
+                      y_labels=col == 0)       # every column has the same limits
+    page.colorbar(sheet.Box(width - round(0.85 * dpi), round(0.25 * height), round(0.15 * dpi), round(0.5 * height)),
+                  matplotlib.colormaps["plasma"], -MAGNITUDE_RANGE_DB, 0.0,
+                  "residual phasor magnitude (dB re strongest pixel)")
+    page.legend((page.px(4), height - page.px(24)), [(GT_COLOUR, "ground truth")], 8, frame=True)
+    renderer_note = "Open3D offscreen" if use == "open3d" else "a z-buffered splat"
+    page.text((width / 2, round(0.15 * dpi)), f"{stem}: radar point clouds over the ground truth (grey), coloured by "
+              f"magnitude; perspective view by {renderer_note}", 9, anchor="mt")
+    return page.save(path)
 
 
 def _window_cm(gt_points: np.ndarray, clouds: list[np.ndarray], axis: int, margin_cm: float = 2.0
@@ -363,96 +408,106 @@ def crop_cm(cells: list[CaptureArrays], margin_cm: float = 1.0) -> tuple[tuple, 
     return (x_cm.min() - margin_cm, x_cm.max() + margin_cm), (y_cm.min() - margin_cm, y_cm.max() + margin_cm)
 
 
+def map_rgb(image: np.ndarray, extent_cm: tuple, xlim: tuple, ylim: tuple, view: sheet.Box, cmap, vmin: float,
+            vmax: float, overlay: np.ndarray | None = None) -> np.ndarray:
+    """(view.height, view.width, 3) uint8: a map (row 0 at the top of `extent_cm`) in the window xlim x ylim (cm)
+    by nearest pixel, coloured by `cmap` over vmin..vmax; white outside the map. `overlay` (no_error_categories):
+    no depth in grey and depth without ground truth in black, painted over the colours where it says so."""
+    values, inside = sheet.map_pixels(image, extent_cm, xlim, ylim, view.width, view.height)
+    rgb = sheet.colours(values, cmap, vmin, vmax)
+    if overlay is not None:
+        categories, _ = sheet.map_pixels(overlay, extent_cm, xlim, ylim, view.width, view.height)
+        for category, colour in enumerate((NO_DEPTH_COLOUR, NO_TRUTH_COLOUR)):
+            rgb[categories == category] = _rgb8(matplotlib.colors.to_rgb(colour))
+    rgb[~inside] = sheet.WHITE
+    return rgb
+
+
 def capture_panel(cells: list[tuple[str, CaptureArrays]], stem: str, path: Path,
                   prior_m: np.ndarray | None = None) -> Path:
     """Per capture: ground truth and prior on top, then per cell depth, magnitude (dB) and signed error (cm); every
-    map on the same x, y window, one colour bar per quantity (top right, with the legend)."""
+    map on the same x, y window (equal scales, nearest pixel), one colour bar per quantity (top right, with the
+    legend)."""
     arrays = [cell for _, cell in cells]
     truth = arrays[0]
     xlim, ylim = crop_cm(arrays)
     depth_cm = np.concatenate([a.depth_m[np.isfinite(a.depth_m)] for a in arrays] +
                               [truth.gt_depth_m[np.isfinite(truth.gt_depth_m)]]) * 100
     depth_range = (np.percentile(depth_cm, 1), np.percentile(depth_cm, 99)) if depth_cm.size else (20.0, 40.0)
-    depth_map = plt.get_cmap("viridis").with_extremes(bad=NO_DEPTH_COLOUR)
-    level_map = plt.get_cmap("plasma").with_extremes(bad=NO_DEPTH_COLOUR)
-    error_map = plt.get_cmap("RdBu_r").with_extremes(bad=NO_DEPTH_COLOUR)
-    overlay_map = ListedColormap([NO_DEPTH_COLOUR, NO_TRUTH_COLOUR])
-    fig = plt.figure(figsize=(10.5, 3.0 * (len(cells) + 1) + 0.6))
-    axes = _fixed_grid(fig, len(cells) + 1, 3, left_in=0.7, right_in=0.2, top_in=0.5, bottom_in=0.5,
-                       hspace=0.25, wspace=0.1).subplots(squeeze=False)   # not shared: 45 linked axes cost more
+    depth_map = matplotlib.colormaps["viridis"].with_extremes(bad=NO_DEPTH_COLOUR)
+    level_map = matplotlib.colormaps["plasma"].with_extremes(bad=NO_DEPTH_COLOUR)
+    error_map = matplotlib.colormaps["RdBu_r"].with_extremes(bad=NO_DEPTH_COLOUR)
+    dpi, last = PANEL_DPI, len(cells)
+    width, height = round(10.5 * dpi), round((3.0 * (len(cells) + 1) + 0.6) * dpi)
+    page = sheet.Sheet(width, height, dpi)
+    boxes = sheet.grid(sheet.Box(round(0.7 * dpi), round(0.5 * dpi), width - round(0.9 * dpi), height - dpi),
+                       len(cells) + 1, 3, hspace=0.25, wspace=0.1)
+    aspect = (xlim[1] - xlim[0]) / (ylim[1] - ylim[0])
 
-    def show(ax, image, cmap, vmin, vmax, title):
-        drawn = ax.imshow(image, extent=truth.extent_cm, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
-        ax.set_title(title, fontsize=8)
-        ax.tick_params(labelsize=7)
-        return drawn
+    def show(row: int, col: int, image: np.ndarray, cmap, vmin: float, vmax: float, title: str,
+             overlay: np.ndarray | None = None) -> None:
+        view = boxes[row][col].fit(aspect)
+        page.paste(map_rgb(image, truth.extent_cm, xlim, ylim, view, cmap, vmin, vmax, overlay), view)
+        page.axes(view, xlim, ylim, title=title, xlabel="x (cm)" if row == last else None,
+                  ylabel="y (cm)" if col == 0 else None, x_labels=row == last, y_labels=col == 0)
 
-    depth_drawn = show(axes[0, 0], truth.gt_depth_m * 100, depth_map, *depth_range, "ground truth depth")
+    show(0, 0, truth.gt_depth_m * 100, depth_map, *depth_range, "ground truth depth")
     if prior_m is not None:
-        show(axes[0, 1], prior_m * 100, depth_map, *depth_range, "RealSense prior (MM-2FSK)")
+        show(0, 1, prior_m * 100, depth_map, *depth_range, "RealSense prior (MM-2FSK)")
     else:
-        axes[0, 1].set_axis_off()
-        axes[0, 1].text(0.5, 0.5, "prior not available\n(dataset not readable here)", ha="center",
-                        transform=axes[0, 1].transAxes, fontsize=8)
+        box = boxes[0][1]
+        page.text((box.left + box.width / 2, box.top + box.height / 2 - page.px(8)),
+                  "prior not available\n(dataset not readable here)", 8)
     for row, (label, cell) in enumerate(cells, start=1):
-        show(axes[row, 0], cell.depth_m * 100, depth_map, *depth_range, f"{label}: depth")
+        show(row, 0, cell.depth_m * 100, depth_map, *depth_range, f"{label}: depth")
         valid = np.isfinite(cell.depth_m)
         reference = np.abs(cell.magnitude[valid]).max() if valid.any() else 1.0
         level = np.where(valid, magnitude_db(cell.magnitude, reference or 1.0), np.nan)
-        level_drawn = show(axes[row, 1], level, level_map, -MAGNITUDE_RANGE_DB, 0, f"{label}: magnitude")
-        error_drawn = show(axes[row, 2], signed_error_cm(cell), error_map, -SIGNED_ERROR_LIMIT_CM,
-                           SIGNED_ERROR_LIMIT_CM, f"{label}: depth - ground truth")
-        axes[row, 2].imshow(no_error_categories(cell), extent=truth.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
-                            interpolation="nearest")
-    for (row, col), ax in np.ndenumerate(axes):       # one window for every map: labels on the outer axes only
-        ax.set(xlim=xlim, ylim=ylim)
-        ax.tick_params(labelleft=col == 0, labelbottom=row == len(cells))
-        if col == 0:
-            ax.set_ylabel("y (cm)", fontsize=7)
-        if row == len(cells):
-            ax.set_xlabel("x (cm)", fontsize=7)
-    key = axes[0, 2]
-    key.set_axis_off()
-    key.legend(handles=[Patch(color=NO_DEPTH_COLOUR, label="no depth (filtered or not returned)"),
-                        Patch(color=NO_TRUTH_COLOUR, label="depth where the ground truth has no surface"),
-                        Patch(color=error_map(1.0), label="error > 0: behind the surface"),
-                        Patch(color=error_map(0.0), label="error < 0: in front of it")],
-               loc="upper center", fontsize=7, frameon=False, borderaxespad=0)
-    bars = [(depth_drawn, "depth z (cm)", "neither")]
+        show(row, 1, level, level_map, -MAGNITUDE_RANGE_DB, 0, f"{label}: magnitude")
+        show(row, 2, signed_error_cm(cell), error_map, -SIGNED_ERROR_LIMIT_CM, SIGNED_ERROR_LIMIT_CM,
+             f"{label}: depth - ground truth", overlay=no_error_categories(cell))
+    key = boxes[0][2]
+    page.legend((key.left + round(0.05 * key.width), key.top),
+                [(NO_DEPTH_COLOUR, "no depth (filtered or not returned)"),
+                 (NO_TRUTH_COLOUR, "depth where the ground truth has no surface"),
+                 (matplotlib.colors.to_hex(error_map(1.0)), "error > 0: behind the surface"),
+                 (matplotlib.colors.to_hex(error_map(0.0)), "error < 0: in front of it")], 7)
+    bars = [(depth_map, *depth_range, "depth z (cm)", "neither")]
     if cells:                    # a panel of the ground truth and prior alone has no magnitude or error maps
-        bars += [(level_drawn, "magnitude (dB re strongest pixel)", "min"),
-                 (error_drawn, f"signed error (cm), saturates at ±{SIGNED_ERROR_LIMIT_CM:g}", "both")]
-    for number, (drawn, bar_label, extend) in enumerate(bars):
-        bar = fig.colorbar(drawn, cax=key.inset_axes((0.05, 0.52 - 0.24 * number, 0.9, 0.05)),
-                           orientation="horizontal", extend=extend)
-        bar.set_label(bar_label, fontsize=7)
-        bar.ax.tick_params(labelsize=7)
-        bar.ax.xaxis.set_major_locator(MaxNLocator(5))
-    fig.suptitle(f"{stem}: depth, magnitude and signed error per method (x, y in cm, radar space)", fontsize=9,
-                 y=1 - 0.1 / fig.get_size_inches()[1], va="top")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+        bars += [(level_map, -MAGNITUDE_RANGE_DB, 0.0, "magnitude (dB re strongest pixel)", "min"),
+                 (error_map, -SIGNED_ERROR_LIMIT_CM, SIGNED_ERROR_LIMIT_CM,
+                  f"signed error (cm), saturates at ±{SIGNED_ERROR_LIMIT_CM:g}", "both")]
+    for number, (cmap, vmin, vmax, bar_label, extend) in enumerate(bars):
+        bottom = 0.52 - 0.24 * number                      # of the key's height, from its bottom
+        bar = sheet.Box(key.left + round(0.05 * key.width), key.top + round((0.95 - bottom) * key.height),
+                        round(0.9 * key.width), round(0.05 * key.height))
+        page.colorbar(bar, cmap, vmin, vmax, bar_label, vertical=False, extend=extend, size_pt=7, nbins=5)
+    page.text((width / 2, round(0.1 * dpi)), f"{stem}: depth, magnitude and signed error per method (x, y in cm, "
+              f"radar space)", 9, anchor="mt")
+    return page.save(path)
 
 
 def _capture_pictures(runs: list[tuple[str, Path]], stem: str, out_dir: Path, prior_m: np.ndarray | None,
-                      ply: bool, use: str) -> dict[str, Path]:
-    """Both figures (and the PLY files) of one capture; runs in a worker process of sweep_pictures."""
+                      ply: bool, use: str, recorded: str | None) -> tuple[str, bool]:
+    """One capture, in a worker process of sweep_pictures: (its content key, whether it was drawn). Both figures
+    (and the PLY files) are drawn unless the key equals `recorded`, the key they were last drawn from, and both
+    files are there. The arrays are read once, here, for the key and the figures."""
     cells = [(label, arrays) for label, path in runs if (arrays := read_arrays(path, stem)) is not None]
+    key = _key(cells, stem, prior_m, ply, use)
     files = picture_files(out_dir, stem)
-    return {"point_clouds": point_cloud_figure(cells, stem, files["point_clouds"],
-                                               out_dir / "point_clouds" if ply else None, use=use),
-            "panel": capture_panel(cells, stem, files["panel"], prior_m)}
+    if key == recorded and all(path.is_file() for path in files.values()):
+        return key, False
+    point_cloud_figure(cells, stem, files["point_clouds"], out_dir / "point_clouds" if ply else None, use=use)
+    capture_panel(cells, stem, files["panel"], prior_m)
+    return key, True
 
 
-def _key(runs: list[tuple[str, Path]], stem: str, prior_m: np.ndarray | None, ply: bool, use: str) -> str:
-    """Content key of one capture's pictures: the cells' labels and arrays, the prior, the options and this code."""
-    parts = [stem, ply, use, Path(__file__)]
-    for label, path in runs:
-        arrays = read_arrays(path, stem)
-        if arrays is not None:
-            parts += [label, arrays.depth_m, arrays.gt_depth_m, arrays.magnitude, arrays.x_m, arrays.y_m]
+def _key(cells: list[tuple[str, CaptureArrays]], stem: str, prior_m: np.ndarray | None, ply: bool, use: str) -> str:
+    """Content key of one capture's pictures: the cells' labels and arrays, the prior, the options and the code
+    that draws them (this module and bench.report.sheet)."""
+    parts = [stem, ply, use, Path(__file__), keyed.module_source(sheet)]
+    for label, arrays in cells:
+        parts += [label, arrays.depth_m, arrays.gt_depth_m, arrays.magnitude, arrays.x_m, arrays.y_m]
     return keyed.digest(*parts, prior_m if prior_m is not None else "no prior")
 
 
@@ -464,9 +519,11 @@ def picture_files(out_dir: Path, stem: str) -> dict[str, Path]:
 def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str, np.ndarray] | None = None,
                    ply: bool = True, workers: int | None = None) -> dict[str, dict[str, Path]]:
     """Point-cloud figures (+ PLY) and panels of every capture of the runs ((label, arrays.h5) pairs) under
-    `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}. A capture
-    whose inputs (arrays, labels, prior, options, this module) are unchanged since it was drawn is not redrawn
-    (bench.report.keyed); the others are drawn in `workers` processes (default: one per CPU core)."""
+    `out_dir/point_clouds/` and `out_dir/panels/`; returns {stem: {"point_clouds": png, "panel": png}}. Each
+    capture goes to one of `workers` spawned processes (default: one per CPU core), which reads its arrays once
+    and draws it unless its inputs (arrays, labels, prior, options, the drawing code) are unchanged since it was
+    drawn (bench.report.keyed: the keys are computed there, beside the drawing, not here one capture after another).
+    """
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
@@ -475,18 +532,20 @@ def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str
     use = renderer()
     stems = capture_stems([path for _, path in runs])
     keys = keyed.Keys(out_dir)
-    wanted = {stem: _key(runs, stem, (priors or {}).get(stem), ply, use) for stem in stems}
-    stale = [stem for stem in stems if not keys.fresh(stem, wanted[stem], list(picture_files(out_dir, stem).values()))]
     written = {stem: picture_files(out_dir, stem) for stem in stems}
-    if not stale:
+    if not stems:
         return written
-    workers = max(1, min(len(stale), workers or os.cpu_count() or 1))
-    with bar(len(stale), f"pictures ({use}, {len(stems) - len(stale)} unchanged)", unit="capture") as progress, \
+    workers = max(1, min(len(stems), workers or os.cpu_count() or 1))
+    redrawn = 0
+    with bar(len(stems), f"pictures ({use})", unit="capture") as progress, \
             ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        futures = {stem: pool.submit(_capture_pictures, runs, stem, out_dir, (priors or {}).get(stem), ply, use)
-                   for stem in stale}
+        futures = {stem: pool.submit(_capture_pictures, runs, stem, out_dir, (priors or {}).get(stem), ply, use,
+                                     keys.keys.get(stem)) for stem in stems}
         for stem, future in futures.items():
-            written[stem] = future.result()
-            keys.record(stem, wanted[stem])
+            key, drawn = future.result()
+            if drawn:
+                keys.record(stem, key)
+                redrawn += 1
+            progress.set_postfix_str(f"{progress.n + 1 - redrawn} unchanged", refresh=False)
             progress.update()
     return written

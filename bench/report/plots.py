@@ -11,8 +11,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the file-only backend)
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-from matplotlib.colors import ListedColormap  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import LogFormatter  # noqa: E402
 
 MARKERS = "osD^vP*Xph<>"   # the rows of one method in the runtime plot (its colour), repeating beyond 12
@@ -80,7 +78,7 @@ def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path, workers: int |
     direction), saturating at +-ERROR_LIMIT_CM; "no depth" in grey, depth where the ground truth has no surface in
     black (bench.report.pictures). runs: (label, arrays.h5 of the run) pairs; every capture found gets a figure,
     redrawn only when its cells' labels or arrays (or this code) changed (bench.report.keyed). The figures to
-    draw are drawn by `workers` forked processes (default: one per core; ~2 s each for Table III's 14 cells), where
+    draw are drawn by `workers` forked processes (default: one per core; ~0.3 s each for Table III's 14 cells), where
     this process may fork (`_fork_safe`), else here one after another: the same files either way.
     """
     from bench.report import keyed, pictures
@@ -124,38 +122,34 @@ def _fork_safe() -> bool:
 
 
 def _depth_error_map(runs: list[tuple[str, Path]], stem: str, path: Path) -> None:
-    """The figure of capture `stem` (depth_error_maps) into `path`."""
-    from bench.report import pictures
+    """The figure of capture `stem` (depth_error_maps) into `path`: drawn straight into pixels (bench.report.sheet,
+    as the report's pictures), every map on the same window and equal scales."""
+    from bench.report import pictures, sheet
 
     error_map = plt.get_cmap("RdBu_r").with_extremes(bad=pictures.NO_DEPTH_COLOUR)
-    overlay_map = ListedColormap([pictures.NO_DEPTH_COLOUR, pictures.NO_TRUTH_COLOUR])
     cells = [(label, arrays) for label, h5_path in runs
              if (arrays := pictures.read_arrays(h5_path, stem)) is not None]
     xlim, ylim = pictures.crop_cm([arrays for _, arrays in cells])
     ncols = min(len(cells), 7)
     nrows = -(-len(cells) // ncols)
     aspect = (ylim[1] - ylim[0]) / (xlim[1] - xlim[0])
-    fig, axes = plt.subplots(nrows, ncols, figsize=(2.4 * ncols + 1.6, (2.4 * aspect + 0.7) * nrows + 1.3),
-                             squeeze=False, layout="constrained")
-    for ax in axes.flat[len(cells):]:
-        ax.set_axis_off()
-    for ax, (label, arrays) in zip(axes.flat, cells, strict=False):
-        image = ax.imshow(pictures.signed_error_cm(arrays), extent=arrays.extent_cm, cmap=error_map,
-                          vmin=-ERROR_LIMIT_CM, vmax=ERROR_LIMIT_CM, interpolation="nearest")
-        ax.imshow(pictures.no_error_categories(arrays), extent=arrays.extent_cm, cmap=overlay_map, vmin=0, vmax=1,
-                  interpolation="nearest")
-        ax.set(xlim=xlim, ylim=ylim, xlabel="x (cm)", ylabel="y (cm)")
-        ax.set_title(label, fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.xaxis.label.set_fontsize(7)
-        ax.yaxis.label.set_fontsize(7)
-    fig.colorbar(image, ax=axes, shrink=0.9, extend="both",
-                 label=f"depth - ground truth (cm), saturates at ±{ERROR_LIMIT_CM:g}")
-    fig.legend(handles=[Patch(color=pictures.NO_DEPTH_COLOUR, label="no depth"),
-                        Patch(color=pictures.NO_TRUTH_COLOUR, label="depth, no ground truth"),
-                        Patch(color=error_map(1.0), label="behind the surface"),
-                        Patch(color=error_map(0.0), label="in front of it")],
-               loc="outside lower center", ncols=4, fontsize=7, frameon=False)
-    fig.suptitle(f"{stem}: signed depth error per method (radar space, x and y in cm)", fontsize=9)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    dpi = 100
+    width, height = round((2.4 * ncols + 1.6) * dpi), round(((2.4 * aspect + 0.7) * nrows + 1.3) * dpi)
+    page = sheet.Sheet(width, height, dpi)
+    boxes = sheet.grid(sheet.Box(round(0.6 * dpi), round(0.7 * dpi), width - round(1.8 * dpi),
+                                 height - round(1.3 * dpi)), nrows, ncols, hspace=0.7 / (2.4 * aspect), wspace=0.3)
+    for number, (label, arrays) in enumerate(cells):
+        view = boxes[number // ncols][number % ncols].fit(1 / aspect)
+        page.paste(pictures.map_rgb(pictures.signed_error_cm(arrays), arrays.extent_cm, xlim, ylim, view, error_map,
+                                    -ERROR_LIMIT_CM, ERROR_LIMIT_CM, pictures.no_error_categories(arrays)), view)
+        page.axes(view, xlim, ylim, title=label, xlabel="x (cm)", ylabel="y (cm)")
+    page.colorbar(sheet.Box(width - round(1.0 * dpi), round(0.15 * height), round(0.2 * dpi), round(0.7 * height)),
+                  error_map, -ERROR_LIMIT_CM, ERROR_LIMIT_CM,
+                  f"depth - ground truth (cm), saturates at ±{ERROR_LIMIT_CM:g}", extend="both")
+    entries = [(pictures.NO_DEPTH_COLOUR, "no depth"), (pictures.NO_TRUTH_COLOUR, "depth, no ground truth"),
+               (matplotlib.colors.to_hex(error_map(1.0)), "behind the surface"),
+               (matplotlib.colors.to_hex(error_map(0.0)), "in front of it")]
+    page.legend(((width - page.legend_width(entries, 7)) // 2, height - page.px(20)), entries, 7, across=True)
+    page.text((width / 2, page.px(8)), f"{stem}: signed depth error per method (radar space, x and y in cm)", 9,
+              anchor="mt")
+    page.save(path)

@@ -30,3 +30,8 @@ class DatasetError(Exception):
 class UsageError(ValueError):
     """A request the caller can fix: an unknown configuration, method, prior or parameter, a combination a method
     does not accept, or a capture that lacks what was asked of it. One line; a ValueError for older callers."""
+
+
+class NonFiniteSignal(UsageError):
+    """A radar frame with NaN or Inf samples, found where a backend checks the samples it uploads (the caller names
+    the capture: methods.api)."""

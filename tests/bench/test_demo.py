@@ -111,3 +111,17 @@ def test_the_demo_says_up_front_how_long_it_takes_and_which_step_is_long(tmp_pat
     (tmp_path / "store" / "cells").mkdir(parents=True)
     (tmp_path / "store" / "cells" / "x.json").write_text("{}")
     assert "are reused" in plan(tmp_path / "none", tmp_path / "store", [30])
+
+
+def test_importing_the_demo_is_light_for_the_report_s_spawned_workers():
+    """Each picture worker of the report is a spawned process that imports the demo again as its __main__: the
+    demo's own imports stay out of that (pandas, SciPy and the report's tables cost ~1 s of CPU per worker)."""
+    import subprocess
+    from pathlib import Path
+
+    heavy = ("pandas", "scipy", "bench.report.tables", "bench.report.agreement", "omegaconf", "matplotlib")
+    code = f"import sys, bench.demo; print([m for m in {heavy!r} if m in sys.modules])"
+    found = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                           cwd=Path(demo.__file__).resolve().parents[1])
+    assert found.returncode == 0, found.stderr[-2000:]
+    assert found.stdout.strip() == "[]"

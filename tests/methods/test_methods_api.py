@@ -118,3 +118,67 @@ def test_warm_up_runs_once_per_backend_and_frequency_count(tilted_plate, monkeyp
     reconstruct(tilted_plate, "2fsk", "d05", prior=0.3, grid=grid, device="warp-cpu")
     assert calls == [3, 2]                              # another frequency count: its own warm-up
     assert backend.warmed == {(3, False, False), (2, False, False)}
+
+
+def _with_nan_sample(capture):
+    signal = capture.radar.signal.copy()
+    signal[3, 5, -1] = np.nan
+    return dataclasses.replace(capture, radar=dataclasses.replace(capture.radar, signal=signal))
+
+
+def test_a_frame_with_nan_samples_is_refused_naming_the_capture(tilted_plate):
+    for method, freq in (("bp", None), ("2fsk", "d05")):
+        with pytest.raises(ValueError, match=f"capture {tilted_plate.name} has NaN or Inf samples"):
+            reconstruct(_with_nan_sample(tilted_plate), method, freq, grid=square_grid(0.003, 3, 0.29, 0.31, 5))
+
+
+@pytest.mark.parametrize("checked", [False, True])
+def test_a_backend_that_checks_samples_on_its_device_replaces_the_host_check(tilted_plate, monkeypatch, checked):
+    """Where the backend says it checks a frame's samples when it uploads them (`checks_samples`), the host skips its
+    sum; a frame the method never uploaded (`samples_checked` False) is still checked on the host after the run, and
+    the backend's NonFiniteSignal becomes the same one-line error naming the capture."""
+    from methods import api
+    from methods.backends import backend_for
+    from methods.domain.errors import NonFiniteSignal
+
+    backend, host_checks = backend_for("cpu"), []
+    check_signal = api._check_signal
+    monkeypatch.setattr(api, "_check_signal", lambda capture, signal: host_checks.append(1) or check_signal(
+        capture, signal))
+    monkeypatch.setattr(backend, "checks_samples", lambda signal: True, raising=False)
+    monkeypatch.setattr(backend, "samples_checked", lambda signal: checked, raising=False)
+    grid = square_grid(0.003, 3, 0.29, 0.31, 5)
+    reconstruct(tilted_plate, "bp", None, grid=grid)
+    assert host_checks == ([] if checked else [1])
+    if not checked:                                   # never uploaded: the host's check after the run refuses it
+        with pytest.raises(ValueError, match=f"capture {tilted_plate.name} has NaN or Inf samples"):
+            reconstruct(_with_nan_sample(tilted_plate), "bp", None, grid=grid)
+        return
+
+    def refuse(*args, **kwargs):
+        raise NonFiniteSignal("the radar frame has NaN or Inf samples")
+    monkeypatch.setattr(backend, "volume_peak", refuse)
+    monkeypatch.setattr(backend, "correlate", refuse)
+    with pytest.raises(ValueError, match=f"^the radar frame of capture {tilted_plate.name} has NaN or Inf samples$"):
+        reconstruct(tilted_plate, "bp", None, grid=grid, roi="none")
+
+
+@pytest.mark.parametrize("device", [CUDA])
+def test_cuda_checks_the_samples_it_uploads(tilted_plate, monkeypatch, device):
+    """On CUDA a frame the cache checks (`FrameCache.CHECK_BYTES`, lowered here to this small frame) is checked on
+    the device: a NaN sample is refused with the host's message, a finite frame gives the host-checked result."""
+    from methods.backends import backend_for
+    from methods.backends.warp.frames import FrameCache
+
+    grid = square_grid(0.003, 5, 0.29, 0.31, 11)
+    host_checked = reconstruct(tilted_plate, "bp", None, grid=grid, device=device)
+    monkeypatch.setattr(FrameCache, "CHECK_BYTES", 0)
+    backend = backend_for(device)
+    assert backend.checks_samples(tilted_plate.radar.signal)
+    device_checked = reconstruct(tilted_plate, "bp", None, grid=grid, device=device)
+    assert backend.samples_checked(tilted_plate.radar.signal)
+    assert np.array_equal(device_checked.depth_m, host_checked.depth_m, equal_nan=True)
+    nan_frame = _with_nan_sample(tilted_plate)
+    with pytest.raises(ValueError, match=f"^the radar frame of capture {tilted_plate.name} has NaN or Inf samples$"):
+        reconstruct(nan_frame, "bp", None, grid=grid, device=device)
+    assert not backend.samples_checked(nan_frame.radar.signal)

@@ -54,6 +54,16 @@ class WarpBackend(Backend):
     def holding_frame(self, signal):
         return self.frames.held(signal)
 
+    def checks_samples(self, signal: np.ndarray) -> bool:
+        """Whether this backend checks `signal` (n_rx, n_tx, F) for NaN/Inf samples on the device when it uploads
+        it (`FrameCache.checks`: CUDA, frames of >= 1 MB), raising `NonFiniteSignal`; the caller then skips its own
+        check, and asks `samples_checked` after the run (a method that never uploads it was not checked)."""
+        return self.frames.checks(np.asarray(signal))
+
+    def samples_checked(self, signal: np.ndarray) -> bool:
+        """Whether this very array's samples were checked (and found finite) by the last frame lookup."""
+        return self.frames.checked(signal)
+
     def make_launch(self, signal, freqs_hz, tx_m, rx_m, *, kernel: str | None = None, points_m=None, grid_m=None,
                     sum_freqs: bool = False, reuse: bool = False):
         """`correlation.make_launch` on this device (the benchmarks time the function it returns)."""

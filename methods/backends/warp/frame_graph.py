@@ -18,6 +18,8 @@ Warp-CPU's default), which is how the tests compare this path with the step-by-s
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import warp as wp
 
@@ -73,9 +75,12 @@ class GraphCorrelator:
         self.scale = wp.float32(1.0 / (n_rx * n_tx))
         self.every = wp.array([2**31 - 1], dtype=wp.int32, device=dev)
 
-    def load(self, signal: np.ndarray) -> None:
-        """Stage a frame's samples (n_rx, n_tx, F) for the next run."""
-        np.copyto(self.raw_view, signal, casting="same_kind")
+    def load(self, signal: np.ndarray, indices: list[int] | None = None) -> None:
+        """Stage a frame's samples (n_rx, n_tx, F) (with `indices`, those frequencies of it) for the next run."""
+        if indices is not None and signal.dtype == np.complex64:     # gathered straight into the staging buffer
+            np.take(signal, indices, axis=2, out=self.raw_view, mode="clip")
+        else:
+            np.copyto(self.raw_view, signal if indices is None else signal[:, :, indices], casting="same_kind")
 
     def enqueue_tables(self) -> None:
         dev = self.device
@@ -101,12 +106,13 @@ class GraphCorrelator:
                       inputs=[0, points, empty, empty, empty, inputs.rx, inputs.tx_padded, inputs.k[:f],
                               inputs.cycles[:f], inputs.signal_padded[:f], 0, self.out], device=dev)
             return self.out
+        count = self.every if count is None else count
         wp.launch(ck.prepare_points, dim=n, inputs=[0, points, empty, empty, empty, self.cycles[:f], self.pts,
-                                                    self.common], device=dev)
+                                                    self.common, count], device=dev)
         n_blocks = (n + int(ck.TC2_POINTS) - 1) // int(ck.TC2_POINTS)
         wp.launch_tiled(ck.correlate_tiles_tx_halves, dim=[n_blocks],
                         inputs=[self.pts, self.rx4, self.tx4, self.k[:f], self.gain, self.mat_h, self.common, 0,
-                                self.out, self.every if count is None else count], block_dim=ck.TC_BLOCK, device=dev)
+                                self.out, count], block_dim=ck.TC_BLOCK, device=dev)
         return self.out
 
 
@@ -334,7 +340,7 @@ class FrameGraph(CapturedLaunches):
         if self.coarse is None:
             self.correlator.load(signal)
         else:
-            self.correlator.load(signal[:, :, self.coarse])
+            self.correlator.load(signal, self.coarse)
             self.fine_correlator.load(signal)
         self._replay()
         depth_m, magnitude, prior_m = self.maps_back.take(self.shape)
@@ -445,7 +451,7 @@ class FskGraph(CapturedLaunches):
 
     def run(self, signal: np.ndarray) -> tuple[list[np.ndarray], tuple[float, int]]:
         """Maps (depth, magnitude[, coarse depth]) and (z1_m, reference pixel) of a frame."""
-        self.pair_correlator.load(signal if self.pair == list(range(signal.shape[2])) else signal[:, :, self.pair])
+        self.pair_correlator.load(signal, None if self.pair == list(range(signal.shape[2])) else self.pair)
         if self.three:
             self.all_correlator.load(signal)
         self._replay()
@@ -531,11 +537,28 @@ class KeptFskGraph(FskGraph):
         return maps, details, self.lattice_pixel.shape[0] + int(self.rest_count_view[0])
 
 
+_PIXEL_KEYS: list = []      # (weak reference to a read-only pixel mask, its packed bytes), the last few
+
+
+def _pixels_key(pixels: np.ndarray) -> bytes:
+    """The packed bits of a pixel mask (ny, nx) bool; a read-only mask (the API's cached ROI, the same array on
+    every frame of a capture) is packed once (~15 us a call on the H100's host for 301 x 301 pixels)."""
+    if pixels.flags.writeable:
+        return np.packbits(pixels).tobytes()
+    for ref, packed in _PIXEL_KEYS:
+        if ref() is pixels:
+            return packed
+    packed = np.packbits(pixels).tobytes()
+    _PIXEL_KEYS.insert(0, (weakref.ref(pixels), packed))
+    del _PIXEL_KEYS[GRAPHS_KEPT:]
+    return packed
+
+
 def fsk_graph(buffers, grid, pixels: np.ndarray, freqs_hz, pair: list[int], three: bool, tx_m, rx_m, prior_m: float,
               keep_ratio: float, first_only: bool = False, keep: tuple | None = None) -> FskGraph:
     """The FskGraph of this setting (pixels (ny, nx) bool, row-major order), built and captured on first use; with
     `keep` = (step_px, radius_px, margin_db, threshold_db) the KeptFskGraph."""
-    key = ("fsk", str(buffers.wp_device), grid, np.packbits(pixels).tobytes(), np.asarray(freqs_hz).tobytes(),
+    key = ("fsk", str(buffers.wp_device), grid, _pixels_key(pixels), np.asarray(freqs_hz).tobytes(),
            tuple(pair), three, tx_m.tobytes(), rx_m.tobytes(), float(prior_m), float(keep_ratio), bool(first_only),
            keep)
     if key not in _GRAPHS:

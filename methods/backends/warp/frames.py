@@ -4,6 +4,7 @@ buffers. On CUDA a new frame uploads its raw samples once and builds the tensor-
 (`table_kernels`); Warp-CPU builds them on the host (the reference the tests compare with)."""
 from __future__ import annotations
 
+import weakref
 from collections import OrderedDict
 from contextlib import contextmanager
 from functools import cached_property
@@ -13,6 +14,7 @@ import warp as wp
 
 from methods.backends.warp.kernels import tables as table_kernels
 from methods.backends.warp.kernels.correlation import MAX_ANTENNAS, TC2_HALF, TC2_KP, TC2_PAD, TC_ANT, TX_CHUNK
+from methods.domain.errors import NonFiniteSignal
 from methods.domain.radar import C_M_PER_S
 from methods.ops import range_compression
 
@@ -71,10 +73,32 @@ class FrameInputs:
 
     @property
     def raw_device(self) -> wp.array:
-        """The raw frame (R, T, F) vec2f on the device: one upload."""
+        """The raw frame (R, T, F) vec2f on the device: one upload (`upload`, where the cache staged the frame)."""
         return self._get("raw", lambda: wp.array(
             np.ascontiguousarray(self.raw, dtype=np.complex64).view(np.float32).reshape(*self.raw.shape, 2),
             dtype=wp.vec2f, device=self.device))
+
+    def stage(self, signal: np.ndarray, staged: wp.array, chunks: int = 4) -> None:
+        """`raw_device` from the complex64 frame `signal` (R, T, F) through `staged`, a pinned host buffer (R, T, F)
+        vec2f that then holds a copy of it: the host copies `chunks` slabs of rows one after the other, each uploaded
+        asynchronously as soon as it is staged, so the uploads overlap the host's copying (a 9 MB frame from
+        pageable memory cost ~1 ms of the host's time on the H100, besides the copy)."""
+        raw = wp.empty(staged.shape, dtype=wp.vec2f, device=self.device)
+        host = staged.numpy().view(np.complex64)[..., 0]
+        per_row = int(np.prod(signal.shape[1:]))
+        bounds = np.linspace(0, signal.shape[0], min(chunks, signal.shape[0]) + 1).astype(int)
+        for r0, r1 in zip(bounds[:-1], bounds[1:], strict=True):
+            np.copyto(host[r0:r1], signal[r0:r1])
+            wp.copy(raw, staged, dest_offset=r0 * per_row, src_offset=r0 * per_row, count=(r1 - r0) * per_row)
+        self._layouts["raw"] = raw
+
+    def samples_finite(self) -> bool:
+        """Whether every sample of `raw_device` is finite: one kernel and a 4-byte copy back (the host's check of a
+        9 MB frame, a sum, cost ~1 ms on the H100's host)."""
+        flag = wp.zeros(1, dtype=wp.int32, device=self.device)
+        raw = self.raw_device
+        wp.launch(table_kernels.flag_nonfinite, dim=raw.shape, inputs=[raw, flag], device=self.device)
+        return not int(flag.numpy()[0])
 
     def _get(self, name, build):
         if name not in self._layouts:
@@ -193,13 +217,32 @@ class FrameInputs:
 class FrameCache:
     """Device inputs of the last FRAME_CACHE_SIZE frames, found by content (exact comparison with the cached
     frames, newest first; no hash: a CRC of the 141 KB two-frequency frame cost 0.12 ms per call), so repeated
-    calls on one frame (MM-2FSK: one call per frame and prior; benchmarks) upload nothing."""
+    calls on one frame (MM-2FSK: one call per frame and prior; benchmarks) upload nothing.
+
+    On CUDA a new frame's copy (the content later lookups compare with) is made into a pinned host buffer (recycled
+    from evicted frames) and uploaded from there asynchronously; a frame of at least CHECK_BYTES is checked for
+    NaN/Inf on the device after that upload (`NonFiniteSignal`), so the caller need not sum it on the host
+    (`checks`)."""
+
+    CHECK_BYTES = 1 << 20     # BP_max's 9 MB frame: the host's sum cost ~1 ms; a 2-frequency frame's ~0.02 ms
 
     def __init__(self, wp_device: str):
         self.wp_device = wp_device
+        self.staged = not wp.get_device(wp_device).is_cpu
         self._frames: dict = {}
+        self._free: dict = {}           # (shape, dtype) -> pinned buffers of evicted frames
         self._held_signal = None        # `held`: the caller's frame array during one reconstruction
         self._held: tuple | None = None   # (its small arrays, its inputs) once looked up inside `held`
+        self._last = None               # weak reference to the array of the last lookup if checked (`checked`)
+
+    def checks(self, signal: np.ndarray) -> bool:
+        """Whether a lookup of `signal` checks its samples for NaN/Inf on the device (CUDA, complex64,
+        >= CHECK_BYTES): a frame that has any raises `NonFiniteSignal`."""
+        return self.staged and signal.dtype == np.complex64 and signal.nbytes >= self.CHECK_BYTES
+
+    def checked(self, signal: np.ndarray) -> bool:
+        """Whether the last lookup was of this very array and checked its samples (`checks`): they are finite."""
+        return self._last is not None and self._last() is signal
 
     @contextmanager
     def held(self, signal: np.ndarray):
@@ -217,22 +260,50 @@ class FrameCache:
         is_held = self._held_signal is not None and parts[0] is self._held_signal
         if is_held and self._held is not None and all(
                 _equal(a, b) for a, b in zip(parts[1:], self._held[0], strict=True)):
-            return self._held[1]
-        inputs = self._lookup(parts, signal, freqs_hz, tx_m, rx_m)
-        if is_held:
-            self._held = ([a.copy() for a in parts[1:]], inputs)
+            inputs = self._held[1]
+        else:
+            inputs = self._lookup(parts, signal, freqs_hz, tx_m, rx_m)
+            if is_held:
+                self._held = ([a.copy() for a in parts[1:]], inputs)
+        self._last = weakref.ref(signal) if isinstance(signal, np.ndarray) and self.checks(parts[0]) else None
         return inputs
 
     def _lookup(self, parts, signal, freqs_hz, tx_m, rx_m) -> FrameInputs:
         key = (tuple(a.shape for a in parts), tuple(a.dtype.str for a in parts))
-        for cached_key, (cached, inputs) in reversed(self._frames.items()):
+        for cached_key, (cached, inputs, _) in reversed(self._frames.items()):
             if cached_key[:2] == key and all(_equal(a, b) for a, b in zip(parts, cached, strict=False)):
                 return inputs
         inputs = FrameInputs(signal, freqs_hz, tx_m, rx_m, self.wp_device)
-        self._frames[key + (len(self._frames), id(inputs))] = ([a.copy() for a in parts], inputs)
+        staged = None
+        if self.staged and parts[0].dtype == np.complex64:
+            staged = self._pinned(parts[0].shape)
+            inputs.stage(parts[0], staged)
+            copy = staged.numpy().view(np.complex64)[..., 0]
+            if self.checks(parts[0]) and not inputs.samples_finite():
+                self._free[parts[0].shape].append(staged)
+                raise NonFiniteSignal("the radar frame has NaN or Inf samples")
+        else:
+            copy = parts[0].copy()
+        self._frames[key + (len(self._frames), id(inputs))] = ([copy] + [a.copy() for a in parts[1:]], inputs, staged)
         while len(self._frames) > FRAME_CACHE_SIZE:
-            self._frames.pop(next(iter(self._frames)))
+            _, _, old = self._frames.pop(next(iter(self._frames)))
+            if old is not None:
+                self._free.setdefault(tuple(old.shape), []).append(old)
         return inputs
+
+    def _pinned(self, shape) -> wp.array:
+        """A pinned (R, T, F) vec2f host buffer: an evicted frame's (its upload finished: the device is synchronised
+        first). The first frame of a shape allocates all the cache can hold at once (FRAME_CACHE_SIZE + 1: page-locked
+        allocation costs ~ms, and the first call of a shape is the warm-up's)."""
+        shape = tuple(shape)
+        if shape not in self._free:
+            self._free[shape] = [wp.empty(shape, dtype=wp.vec2f, device="cpu", pinned=True)
+                                 for _ in range(FRAME_CACHE_SIZE + 1)]
+        free = self._free[shape]
+        if not free:
+            return wp.empty(shape, dtype=wp.vec2f, device="cpu", pinned=True)
+        wp.synchronize_device(self.wp_device)
+        return free.pop()
 
 
 def _equal(a: np.ndarray, b: np.ndarray) -> bool:
@@ -287,3 +358,16 @@ class BufferPool:
                 del self._buffers[old]
             self._buffers[key] = wp.empty(shape, dtype=dtype, device="cpu", pinned=True)
         return self._buffers[key]
+
+    def pinned_flat(self, n: int, dtype, name: str) -> wp.array:
+        """A reused page-locked 1-d host buffer of that name holding at least n elements (it only grows: sizes that
+        change from call to call, a capture's ROI, do not reallocate page-locked memory, ~ms, each time); pageable
+        on Warp-CPU."""
+        have = [k for k in self._buffers if k[0] == name and k[2] == dtype]
+        if have and have[0][1] >= n:
+            return self._buffers[have[0]]
+        for old in [k for k in self._buffers if k[0] == name]:
+            del self._buffers[old]
+        pinned = not wp.get_device(self.wp_device).is_cpu
+        self._buffers[(name, n, dtype)] = buffer = wp.empty(n, dtype=dtype, device="cpu", pinned=pinned)
+        return buffer

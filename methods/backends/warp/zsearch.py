@@ -85,8 +85,12 @@ def volume_peak(frames: FrameCache, buffers: BufferPool, signal, freqs_hz, tx_m,
         wp.launch(zsearch_kernels.window_peak_depth, dim=n_px,
                   inputs=[vals, n_w, n_cand, start, n_slots, slot_pixel, n_z, float(z_m[0]), float(dz_m), maps,
                           on_edge], device=dev)
-        host = maps.numpy().reshape(2, len(y_m), len(x_m))
-        if dev.is_cpu:
-            host = host.copy()
-        n_edge = int(on_edge.numpy()[0])
+        # both copies back into pinned buffers, one wait (two pageable copies each waited on their own)
+        maps_host = buffers.pinned_flat(maps.size, wp.float64, "zs.maps.pinned")
+        edge_host = buffers.pinned_flat(1, wp.int32, "zs.edge.pinned")
+        wp.copy(maps_host, maps, count=maps.size)
+        wp.copy(edge_host, on_edge, count=1)
+        wp.synchronize_device(dev)
+        host = maps_host.numpy()[:maps.size].reshape(2, len(y_m), len(x_m)).copy()
+        n_edge = int(edge_host.numpy()[0])
     return host[0], host[1], n_edge

@@ -78,6 +78,60 @@ def test_point_cloud_and_ply_hold_the_depth_maps_geometry(sweep_root, tmp_path):
     np.testing.assert_allclose(np.asarray(read.points), points, atol=1e-12)
 
 
+def test_ply_files_are_open3ds_bytes_and_a_cloud_of_no_points_is_one(tmp_path):
+    """write_ply writes what Open3D's writer writes (apart from the comment line naming the writer) on fresh random
+    points and colours, ties at half a colour step and colours beyond 0..1 included; Open3D refuses an empty cloud,
+    write_ply writes one that Open3D reads back."""
+    o3d = pytest.importorskip("open3d")
+    seed = int(np.random.default_rng().integers(1 << 31))
+    print(f"seed {seed}")
+    rng = np.random.default_rng(seed)
+    points = rng.normal(0.0, 0.2, (500, 3))
+    colours = np.concatenate([rng.uniform(-0.2, 1.2, (480, 3)), rng.integers(0, 255, (20, 3)) / 255 + 0.5 / 255])
+    for given in (colours, None):
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+        if given is not None:
+            cloud.colors = o3d.utility.Vector3dVector(given)
+        assert o3d.io.write_point_cloud(str(tmp_path / "open3d.ply"), cloud)
+        ours = pictures.write_ply(tmp_path / "ours.ply", points, given).read_bytes()
+        theirs = (tmp_path / "open3d.ply").read_bytes().replace(b"Created by Open3D", b"Created by mm2fsk-bench")
+        assert ours == theirs
+    empty = pictures.write_ply(tmp_path / "empty.ply", np.zeros((0, 3)), np.zeros((0, 3)))
+    assert len(o3d.io.read_point_cloud(str(empty)).points) == 0 and b"element vertex 0\n" in empty.read_bytes()
+
+
+def test_an_error_map_shows_each_pixel_in_its_colour_or_category():
+    """map_rgb as the panels and depth-error figures use it: the error's colour, grey without depth, black for depth
+    without ground truth, white outside the map (here a 3 x 2 map in a window twice its width)."""
+    import matplotlib
+
+    from bench.report import sheet
+
+    depth = np.array([[0.313, np.nan, 0.30], [0.293, 0.30, 0.32]])   # errors off the colour map's bin edges
+    truth = np.array([[0.30, 0.30, np.nan], [0.30, 0.30, 0.30]])
+    cell = pictures.CaptureArrays(depth, truth, np.ones_like(depth), np.array([-0.01, 0.0, 0.01]),
+                                  np.array([0.005, -0.005]))
+    cmap = matplotlib.colormaps["RdBu_r"]
+    rgb = pictures.map_rgb(pictures.signed_error_cm(cell), cell.extent_cm, (-3.0, 3.0), (-1.0, 1.0),
+                           sheet.Box(0, 0, 6, 2), cmap, -2.0, 2.0, pictures.no_error_categories(cell))
+    expected = lambda error_cm: np.array(cmap((error_cm + 2.0) / 4.0, bytes=True)[:3])   # noqa: E731
+    np.testing.assert_array_equal(rgb[0, 1:4], [expected(1.3), [154, 154, 154], [0, 0, 0]])   # #9a9a9a, black
+    np.testing.assert_array_equal(rgb[1, 1:4], [expected(-0.7), expected(0.0), expected(2.0)])
+    assert (rgb[:, 0] == 255).all() and (rgb[:, 4:] == 255).all()                    # 1 cm pixels, map 3 cm wide
+
+
+def test_a_cell_without_any_depth_still_gets_its_views_and_an_empty_ply(sweep_root, tmp_path):
+    stem = "01_plate_30_000000"
+    cells = [(job.name, pictures.read_arrays(job / "arrays.h5", stem)) for job in sorted(sweep_root.glob("*_*"))]
+    label, cell = cells[1]
+    cells[1] = (label, pictures.CaptureArrays(np.full_like(cell.depth_m, np.nan), cell.gt_depth_m,
+                                              np.zeros_like(cell.magnitude), cell.x_m, cell.y_m))
+    pictures.point_cloud_figure(cells, stem, tmp_path / "cloud.png", tmp_path / "ply", use="splat")
+    pictures.capture_panel(cells, stem, tmp_path / "panel.png")
+    assert b"element vertex 0\n" in (tmp_path / "ply" / stem / f"{pictures._file_name(label)}.ply").read_bytes()
+    assert (tmp_path / "cloud.png").stat().st_size > 0 and (tmp_path / "panel.png").stat().st_size > 0
+
+
 def test_signed_error_keeps_the_direction_of_a_wrap():
     behind = pictures.CaptureArrays(np.array([[0.32]]), np.array([[0.30]]), np.ones((1, 1)), np.zeros(1), np.zeros(1))
     assert pictures.signed_error_cm(behind)[0, 0] == pytest.approx(2.0)
@@ -86,7 +140,7 @@ def test_signed_error_keeps_the_direction_of_a_wrap():
     assert pictures.signed_error_cm(in_front)[0, 0] == pytest.approx(-3.0)
 
 
-def test_the_matplotlib_perspective_is_a_pinhole_view_from_the_open3d_camera():
+def test_the_splat_perspective_is_a_pinhole_view_from_the_open3d_camera():
     seed = int(np.random.default_rng().integers(1 << 31))              # fresh inputs each run, the seed printed
     print(f"seed {seed}")
     rng = np.random.default_rng(seed)
@@ -109,25 +163,26 @@ def test_the_matplotlib_perspective_is_a_pinhole_view_from_the_open3d_camera():
 def test_renderer_is_chosen_at_run_time(monkeypatch):
     monkeypatch.setattr(pictures, "_open3d_renders", lambda: False)
     monkeypatch.delenv("BENCH_RENDERER", raising=False)
-    assert pictures.renderer() == "matplotlib"
+    assert pictures.renderer() == "splat"
     monkeypatch.setenv("BENCH_RENDERER", "open3d")
     with pytest.raises(RuntimeError, match="offscreen renderer does not run here"):
         pictures.renderer()
     monkeypatch.setattr(pictures, "_open3d_renders", lambda: True)
     assert pictures.renderer() == "open3d"
+    monkeypatch.setenv("BENCH_RENDERER", "splat")
+    assert pictures.renderer() == "splat"
     monkeypatch.setenv("BENCH_RENDERER", "matplotlib")
-    assert pictures.renderer() == "matplotlib"
-    monkeypatch.setenv("BENCH_RENDERER", "vtk")
-    with pytest.raises(ValueError, match="choose one of open3d, matplotlib"):
+    with pytest.raises(ValueError, match="choose one of open3d, splat"):
         pictures.renderer()
 
 
-@pytest.mark.parametrize("use", ["matplotlib", "open3d"])
+@pytest.mark.parametrize("use", ["splat", "open3d"])
 def test_both_renderers_draw_the_point_clouds(sweep_root, tmp_path, use):
-    pytest.importorskip("open3d")
-    if use == "open3d" and not pictures._open3d_renders():
-        pytest.skip("Open3D's offscreen renderer does not run here (needs a Vulkan driver: apt-get install "
-                    "libvulkan1 mesa-vulkan-drivers); the matplotlib case covers the fallback")
+    if use == "open3d":
+        pytest.importorskip("open3d")
+        if not pictures._open3d_renders():
+            pytest.skip("Open3D's offscreen renderer does not run here (needs a Vulkan driver: apt-get install "
+                        "libvulkan1 mesa-vulkan-drivers); the splat case covers the fallback")
     from PIL import Image
 
     stem = "01_plate_30_000000"
@@ -177,7 +232,6 @@ def test_report_renders_in_a_real_browser(sweep_root, tmp_path):
 
 
 def test_report_opens_with_a_verdict_links_its_images_and_redraws_only_what_changed(sweep_root, tmp_path):
-    pytest.importorskip("open3d")
     root = shutil.copytree(sweep_root, tmp_path / "sweep")
     page = html.write_report([root], tmp_path / "report.html")
     text = page.read_text()
@@ -203,6 +257,11 @@ def test_report_opens_with_a_verdict_links_its_images_and_redraws_only_what_chan
     assert plot.stat().st_mtime_ns != plot_drawn
     assert "P: 2FSK Δ0.5, 0.30 cm over 1 of 2 captures; better than the runner-up MM-2FSK Δ10.0 (0.31 cm)" in \
         (tmp_path / "report.html").read_text()
+    write_arrays(root / "0_mm2fsk_d10_realsense" / "arrays.h5", "03_sphere_30_000000",   # one capture's arrays change
+                 _arrays(np.random.default_rng(8), 0.004), GRID)
+    html.write_report([root], tmp_path / "report.html")
+    redrawn = {p for p in pictures_drawn if p.stat().st_mtime_ns != pictures_drawn[p]}
+    assert {p.name for p in redrawn} == {"03_sphere_30_000000.png"} and len(redrawn) == 2   # its two figures only
 
 
 def test_report_cli_mistakes_are_one_line(tmp_path):

@@ -177,9 +177,13 @@ def cmul_gain(a: wp.vec2f, b: wp.vec2f, g: wp.float32) -> wp.vec2f:
 def prepare_points(grid: int, points: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.float64),
                    y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64),
                    cycles_per_m: wp.array(dtype=wp.float64), pts: wp.array(dtype=wp.vec4f),
-                   common: wp.array2d(dtype=wp.vec2f)):
-    """Per point: (x, y, z, |p|) in float32 and the common phasor exp(j 2 k |p|) per frequency (float64 reduced)."""
+                   common: wp.array2d(dtype=wp.vec2f), count: wp.array(dtype=wp.int32)):
+    """Per point: (x, y, z, |p|) in float32 and the common phasor exp(j 2 k |p|) per frequency (float64 reduced);
+    only the first count[0] points (a launch of fixed size in a CUDA graph: the rest are left as they were, and the
+    tensor-core blocks that would read them return at once or compute lanes nobody reads)."""
     i = wp.tid()
+    if i >= count[0]:
+        return
     p64 = point_at(i, grid, points, x, y, z)
     norm64 = wp.length(p64)
     pts[i] = wp.vec4f(wp.float32(p64[0]), wp.float32(p64[1]), wp.float32(p64[2]), wp.float32(norm64))

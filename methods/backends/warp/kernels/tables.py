@@ -110,3 +110,13 @@ def tx_split_table(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_r
         mat_hl[f, slot, j, i] = hi
     else:
         mat_hl[f, slot, j, i] = wp.float16(wp.float32((q - wp.float64(wp.float32(hi))) * wp.float64(TC3_SCALE)))
+
+
+@wp.kernel(enable_backward=False)
+def flag_nonfinite(signal: wp.array3d(dtype=wp.vec2f), flag: wp.array(dtype=wp.int32)):
+    """flag[0] = 1 where a sample of the raw frame (R, T, F) is NaN or Inf (flag zeroed before; every writer writes
+    the same 1, so no atomic is needed)."""
+    r, t, f = wp.tid()
+    s = signal[r, t, f]
+    if not (wp.isfinite(s[0]) and wp.isfinite(s[1])):
+        flag[0] = 1
