@@ -15,6 +15,8 @@ from bench.synth import SynthConfig, generate_catalogue, workers
 from bench.synth.config import preset
 from bench.synth.radar import remote, warp_sum
 
+from devices import CUDA
+
 OBJECTS = ["01_plate", "08_two_objects"]     # metal; metal and cardboard (multipath, transmission: realistic)
 FAST = SynthConfig(frequency_points=16)
 
@@ -126,7 +128,10 @@ def test_a_worker_gets_the_frame_the_server_computes_and_its_errors(monkeypatch)
     assert isinstance(error, ValueError) and "no such device" in str(error)
 
 
-def test_a_worker_s_warp_frame_is_the_frame_summed_in_this_process():
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_a_worker_s_warp_frame_is_the_frame_summed_in_this_process(device):
+    """The worker never touches the device (it may not: CUDA does not survive a fork); the frame it receives is the
+    one this process sums, bit for bit."""
     pytest.importorskip("warp")
     from bench.maroon.antennas import load_antenna_array
 
@@ -134,9 +139,9 @@ def test_a_worker_s_warp_frame_is_the_frame_summed_in_this_process():
     rows, points = _rows(rng, 3000)
     antennas = load_antenna_array(all_elements=True)
     freqs = np.linspace(72e9, 82e9, 16)
-    here = warp_sum.frame(rows, points, antennas.rx_m, antennas.tx_m, freqs, "warp-cpu")
+    here = warp_sum.frame(rows, points, antennas.rx_m, antennas.tx_m, freqs, device)
     with remote.DeviceServer() as server:
-        there = _call_in_worker(server.address, rows, points, antennas.rx_m, antennas.tx_m, freqs, "warp-cpu")
+        there = _call_in_worker(server.address, rows, points, antennas.rx_m, antennas.tx_m, freqs, device)
     assert np.abs(here).max() > 0
     np.testing.assert_array_equal(there, here)
 
