@@ -2,9 +2,9 @@
 
 CUDA does not survive a fork, and each process on the GPU would hold a context of its own (start-up, memory, the
 kernels loaded again) and take turns on the device with the others; so worker processes (bench.synth.workers) send
-the rows of each frame (`warp_sum.frame`'s arguments) over a local socket and receive the frame. The sums run in
-the serving process exactly as they would in the worker, one frame per connection at a time: the frames are the
-same (tests/bench/synth/test_synth_workers.py).
+the rows of each frame, split into blocks (`warp_sum.frame_of_blocks`'s arguments), over a local socket and receive
+the frame. The sums run in the serving process exactly as they would in the worker, one frame per connection at a
+time: the frames are the same (tests/bench/synth/test_synth_workers.py).
 """
 from __future__ import annotations
 
@@ -25,8 +25,8 @@ def _start_device() -> None:
 
 
 class DeviceServer:
-    """Serves `warp_sum.frame` to the processes that connect to `address` (path, key), one thread per connection,
-    until closed; starts the device at once (its start overlaps the workers' first stages)."""
+    """Serves `warp_sum.frame_of_blocks` to the processes that connect to `address` (path, key), one thread per
+    connection, until closed; starts the device at once (its start overlaps the workers' first stages)."""
 
     def __init__(self):
         self._folder = Path(tempfile.mkdtemp(prefix="synth-device-"))
@@ -64,7 +64,7 @@ class DeviceServer:
                 except (EOFError, OSError):       # the worker has gone
                     return
                 try:
-                    reply = (True, warp_sum.frame(*arguments))
+                    reply = (True, warp_sum.frame_of_blocks(*arguments))
                 except Exception as err:          # raised again in the worker that asked
                     reply = (False, err)
                 connection.send(reply)
@@ -83,7 +83,7 @@ _lock = threading.Lock()
 
 
 def connect(path: str, key: bytes) -> None:
-    """Send this process's Warp sums (warp_sum.frame) to the DeviceServer at `path`."""
+    """Send this process's Warp sums (warp_sum.frame, its rows in blocks) to the DeviceServer at `path`."""
     connection = Client(path, "AF_UNIX", authkey=key)
 
     def frame(*arguments):

@@ -13,7 +13,7 @@ import pytest
 
 from bench.synth import SynthConfig, generate_catalogue, workers
 from bench.synth.config import preset
-from bench.synth.radar import remote, warp_sum
+from bench.synth.radar import leg_sum, remote, warp_sum
 
 from devices import CUDA
 
@@ -107,24 +107,26 @@ def test_a_worker_gets_the_frame_the_server_computes_and_its_errors(monkeypatch)
     """Without Warp: the server's frame function stands in; what the worker sends arrives intact, what it computes
     comes back intact, an error comes back as the error."""
     rng = np.random.default_rng(7)
-    rows, points = _rows(rng, 50)
+    rows, points = _rows(rng, 5000)
     antennas = rng.uniform(-0.1, 0.1, (6, 3))
     seen = []
 
-    def fake_frame(rows_, positions, rx_m, tx_m, freqs_hz, device):
+    def fake_frame(rows_, blocks, rx_m, tx_m, freqs_hz, device):
         if device == "bad":
             raise ValueError("no such device")
-        seen.append((rows_, positions))
+        seen.append((rows_, blocks))
         return np.full((len(rx_m), len(tx_m), len(freqs_hz)), rows_.rx.amplitude.sum(), np.complex64)
 
-    monkeypatch.setattr(warp_sum, "frame", fake_frame)
+    monkeypatch.setattr(warp_sum, "frame_of_blocks", fake_frame)
     monkeypatch.setattr(warp_sum, "start", lambda: None)
     with remote.DeviceServer() as server:
         frame = _call_in_worker(server.address, rows, points, antennas[:2], antennas[2:], np.arange(5.0), "x")
         error = _call_in_worker(server.address, rows, points, antennas[:2], antennas[2:], np.arange(5.0), "bad")
     assert frame.shape == (2, 4, 5) and np.all(frame == rows.rx.amplitude.sum())
-    np.testing.assert_array_equal(seen[0][1], points)
+    blocks = leg_sum.compact_blocks(points, leg_sum.BLOCK_ROWS)               # made in the worker
+    assert len(blocks) > 1 and len(seen[0][1]) == len(blocks) and all(map(np.array_equal, seen[0][1], blocks))
     np.testing.assert_array_equal(seen[0][0].tx.lobe_rad, rows.tx.lobe_rad)
+    np.testing.assert_array_equal(seen[0][0].rx.point_m, points)
     assert isinstance(error, ValueError) and "no such device" in str(error)
 
 
