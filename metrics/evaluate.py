@@ -160,6 +160,24 @@ def ground_truth_from_rasters(depth_m: np.ndarray, reference_depth_m: np.ndarray
                        reference=reference)
 
 
+def ground_truth_arrays(gt: GroundTruth) -> dict[str, np.ndarray]:
+    """What `ground_truth_from_rasters` computed (rasters, points, silhouettes, the reference's splat), by name: kept
+    on disk (bench.harness.captures), `ground_truth_from_arrays` gives the same ground truth back without
+    computing it again."""
+    return {"depth_m": gt.depth_m, "reference_depth_m": gt.reference.depth_m, "points_m": gt.points.points_m,
+            "silhouette": gt.silhouette, "eroded_silhouette": gt.eroded_silhouette,
+            "reference_points_m": gt.reference.points.points_m, "reference_splat_mm": gt.reference.splat_mm}
+
+
+def ground_truth_from_arrays(arrays: dict[str, np.ndarray], grid: RadarGrid, metadata) -> GroundTruth:
+    """The ground truth of `ground_truth_arrays`' arrays (checked by the caller) with the capture's metadata."""
+    reference = ReferenceGroundTruth(depth_m=arrays["reference_depth_m"], points=PointSet(arrays["reference_points_m"]),
+                                     splat_mm=arrays["reference_splat_mm"], mask_bb_m=reference_mask_bb_m(metadata))
+    return GroundTruth(grid=grid, depth_m=arrays["depth_m"], points=PointSet(arrays["points_m"]),
+                       silhouette=arrays["silhouette"], eroded_silhouette=arrays["eroded_silhouette"],
+                       mask_bb_m=metadata.mask_bb_m, mask_erosion=metadata.mask_erosion, reference=reference)
+
+
 def _mean_abs_cm(depth_m: np.ndarray, gt_depth_m: np.ndarray, compared: np.ndarray) -> float:
     if not compared.any():
         return float("nan")
@@ -185,6 +203,22 @@ def reference_projective(depth_m: np.ndarray, used: np.ndarray, source_mask: np.
     if not counted.any():
         return float("nan"), 0
     return float(np.mean(np.abs(errors_mm[counted])) / 10.0), int(counted.sum())
+
+
+def _c_s_and_off_err_cm(radar_points_m: np.ndarray, off: np.ndarray, gt_points: PointSet, sound_points: PointSet
+                        ) -> tuple[float, float]:
+    """C_s (cm: `radar_points_m` to `gt_points`) and off_err (cm: the radar points flagged `off`, off the object, to
+    the sound ground truth's points). Where both go to the same points (the sound profile) the off points'
+    distances are picked from C_s's query, not queried again: the same numbers, since a point's nearest distance
+    does not depend on the other points of its query."""
+    off_points_m = radar_points_m[off]
+    if gt_points is not sound_points or not len(radar_points_m) or not len(gt_points.points_m):
+        off_err_cm = (float(np.mean(nearest_distances_m(off_points_m, sound_points))) * 100.0
+                      if len(off_points_m) and len(sound_points.points_m) else float("nan"))
+        return one_sided_chamfer_m(radar_points_m, gt_points) * 100.0, off_err_cm
+    distances_m = nearest_distances_m(radar_points_m, gt_points)
+    off_err_cm = float(np.mean(distances_m[off])) * 100.0 if len(off_points_m) else float("nan")
+    return float(np.mean(distances_m)) * 100.0, off_err_cm
 
 
 def _failure(depth_m: np.ndarray, used: np.ndarray, selected: np.ndarray, scores: dict) -> str:
@@ -226,12 +260,10 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
     outside = used & ~selected
     counted = selected.sum() + outside.sum()
     silhouette_px = int(gt.silhouette.sum())
-    off_points_m = points_m[off]
-    off_err_cm = (float(np.mean(nearest_distances_m(off_points_m, gt.points))) * 100.0
-                  if len(off_points_m) and len(gt.points.points_m) else float("nan"))
+    c_s_cm, off_err_cm = _c_s_and_off_err_cm(radar_points_m, off[selected], gt_points, gt.points)
     scores = {
         "C_g_cm": one_sided_chamfer_m(gt_points.points_m, PointSet(radar_points_m)) * 100.0,
-        "C_s_cm": one_sided_chamfer_m(radar_points_m, gt_points) * 100.0,
+        "C_s_cm": c_s_cm,
         "P_cm": p_cm, "P_e_cm": p_e_cm,
         "coverage_pct": 100.0 * (selected & gt.silhouette).sum() / silhouette_px if silhouette_px else float("nan"),
         "off_pct": 100.0 * (off.sum() + outside.sum()) / counted if counted else float("nan"),

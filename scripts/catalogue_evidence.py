@@ -64,8 +64,9 @@ def config_of(seed: int, freqs: int, change: dict | None = None):
 
 
 def memoise_radar() -> None:
-    """Camera variants leave the radar settings alone: one process builds each capture's radar frames once."""
-    from bench.synth import generate as gen
+    """Camera variants leave the radar settings alone: one process builds each capture's radar frames once (a
+    script run by path builds its captures in threads of this process: bench.synth.workers)."""
+    from bench.synth import parts as gen
     memo, frames = {}, gen._radar_frames
 
     def memo_frames(scene, config, rng, device="cpu"):

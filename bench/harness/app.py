@@ -30,6 +30,7 @@ from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 from bench import cli
 from bench.harness import CONFIG_DIR, captures, stages, validate, workers
 from bench.harness import results as outputs
+from bench.harness.codeversion import default_cache_dir
 from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
@@ -289,6 +290,35 @@ def _store(root: str) -> Store:
     return Store(root)
 
 
+def kept_inputs_dir(cfg: DictConfig) -> Path | None:
+    """`store.cache` as a folder (auto: the user's cache folder, bench.harness.codeversion.default_cache_dir), or
+    None (null, or auto where no cache folder is known)."""
+    setting = OmegaConf.select(cfg, "store.cache", default=None)
+    if setting is None:
+        return None
+    return default_cache_dir() if setting == "auto" else Path(to_absolute_path(str(setting)))
+
+
+def _kept_inputs(cfg: DictConfig, dataset_root: Path) -> Store | None:
+    """Where a run without a result store keeps the ground truths' rasters, the parsed meshes and the files' digests,
+    by content (bench.harness.captures): `store.cache`, so that a later process neither imports Open3D nor casts
+    rays for captures seen before. None where nothing is kept: `store.cache=null`, or `auto` where the user's cache
+    folder cannot be written (nothing kept, the run goes on). A folder inside the dataset is a user error: the
+    dataset is never written."""
+    folder = kept_inputs_dir(cfg)
+    if folder is None:
+        return None
+    if folder.resolve().is_relative_to(dataset_root.resolve()):
+        if cfg.store.cache == "auto":
+            return None              # a dataset holding the user's cache folder (e.g. the home): nothing kept
+        raise cli.UserError(f"store.cache={cfg.store.cache}", f"is inside the dataset ({dataset_root}), which is "
+                                                              "never written: name a folder outside it")
+    existing = next(p for p in (folder, *folder.parents) if p.exists())
+    if not (existing.is_dir() and os.access(existing, os.W_OK | os.X_OK)):
+        return None                 # `auto` only: a named folder was checked by `main` (one line if not writable)
+    return _store(str(folder))
+
+
 def _grid_attrs(grid: RadarGrid) -> dict:
     return {"bb_min_m": list(grid.bb_min_m), "bb_max_m": list(grid.bb_max_m), "grid_size": list(grid.size)}
 
@@ -313,24 +343,36 @@ def _stem(row: dict) -> str:
     return f"{row['object']}_{row['distance']}_{row['frame']:06d}"
 
 
+def _arrays_attrs(grid: RadarGrid, key: str | None) -> dict:
+    """The attributes of a capture's group in arrays.h5."""
+    return {**_grid_attrs(grid), "key": key or ""}
+
+
 def _write_outputs(out_dir: Path, row: dict, arrays: dict | bytes | None, grid: RadarGrid, store: Store | None,
-                   key: str | None, results_csv: ResultsCsv, depth_written: bool = False) -> None:
-    """One capture's files: depth PNG + JSON + preview (unless a worker wrote them), its arrays in arrays.h5 (copied
-    from the store's cell when there is one, or from the image of one a worker compressed: `arrays` as bytes), its
-    results.csv line."""
+                   key: str | None, results_csv: ResultsCsv, depth_written: bool = False,
+                   arrays_written: bool = False) -> None:
+    """One capture's files: depth PNG + JSON + preview (unless a worker wrote them), its arrays in arrays.h5 (unless
+    the output process wrote them; copied from the store's cell when there is one, or from the image of one a worker
+    compressed: `arrays` as bytes), its results.csv line."""
     with stages.stage("outputs"):
         stem = _stem(row)
         if not depth_written:
             write_depth(out_dir, stem, arrays["depth_m"], grid)
-        array_attrs = {**_grid_attrs(grid), "key": key or ""}
-        if store is not None:      # compressed once, into the store
-            store.copy_arrays(key, out_dir / "arrays.h5", stem, array_attrs)
-        elif isinstance(arrays, bytes):
-            with h5py.File(io.BytesIO(arrays), "r") as image:
-                copy_cell(image, out_dir / "arrays.h5", stem, array_attrs)
-        else:
-            write_arrays(out_dir / "arrays.h5", stem, arrays, array_attrs)
+        if not arrays_written:
+            _add_arrays(out_dir / "arrays.h5", stem, arrays, _arrays_attrs(grid, key), store, key)
         results_csv.add(row)       # appended after every capture: an interruption loses no row
+
+
+def _add_arrays(path: Path, stem: str, arrays: dict | bytes | None, attrs: dict, store: Store | None,
+                key: str | None) -> None:
+    """A capture's arrays into arrays.h5 as group `stem` (bench.harness.store.write_arrays' layout)."""
+    if store is not None:      # compressed once, into the store
+        store.copy_arrays(key, path, stem, attrs)
+    elif isinstance(arrays, bytes):
+        with h5py.File(io.BytesIO(arrays), "r") as image:
+            copy_cell(image, path, stem, attrs)
+    else:
+        write_arrays(path, stem, arrays, attrs)
 
 
 def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str = "alone", params: str = "",
@@ -363,6 +405,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     if not root.exists():
         raise DatasetError(root, "dataset root does not exist")
     store = None if cfg.store.dir is None else _store(to_absolute_path(str(cfg.store.dir)))
+    kept = store if store is not None else _kept_inputs(cfg, root)
     grid_override = _container(cfg.grid.override)
     spec = parse_frame_spec(OmegaConf.to_container(cfg.dataset.frame) if OmegaConf.is_list(cfg.dataset.frame)
                             else cfg.dataset.frame)
@@ -374,6 +417,10 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                                           shared=timing == "parallel"))
     if pool is not None:
         timing = "parallel"              # the workers share the host with the timed calls (bench.harness.workers)
+    writing = pool or workers.output_process(shared=timing == "parallel")     # writes the depth files elsewhere
+    # without a store every row is computed and goes through the output process, whose tasks run one after another:
+    # it writes arrays.h5 too (with a store, rows read from it are copied into arrays.h5 here: one writer only)
+    owns_arrays = pool is None and writing is not None and store is None
     rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _JobLog()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
@@ -397,9 +444,9 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                     hit = None           # its runtime was measured beside other jobs (or not recorded): re-measure
             if hit is None:
                 row, task, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
-                                                store, grid_override, device, timing, identity)
+                                                kept, grid_override, device, timing, identity)
                 row.update(hostname=socket.gethostname(), code_version=cell["code"], key=key)
-                result = _scored(task, row, grid, out_dir, store, pool, writer)
+                result = _scored(task, row, grid, out_dir, store, pool, writing, writer, owns_arrays)
                 computed_s.append(time.perf_counter() - started)
             else:
                 row, arrays, attrs = hit
@@ -409,7 +456,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 result = workers.done((row, arrays, {}))
             rows.append({"object": row["object"], "distance": row["distance"], "cached": hit is not None})
             writer.submit(_finish, result, rows, len(rows) - 1, out_dir, grid, store, key, results_csv,
-                          hit is None and pool is not None, job_log)
+                          hit is None and writing is not None, job_log, hit is None and owns_arrays)
     except BaseException:
         with stages.stage("outputs"):
             writer.close()
@@ -427,15 +474,20 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     return rows
 
 
-def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, store: Store | None, pool,
-            writer: BackgroundWriter):
-    """A computed capture scored (bench.harness.workers): in this thread without a pool (its cell then written by
-    the writer), else in a worker, which also writes its depth files and cell. A future of (row, arrays or None,
-    the worker's seconds by stage)."""
+def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, store: Store | None, pool, writing,
+            writer: BackgroundWriter, owns_arrays: bool = False):
+    """A computed capture scored (bench.harness.workers): in this thread without a pool, its depth files and cell
+    then written by the output process (`writing`, bench.harness.workers.output_process) or, without one, the
+    writer; else in a worker, which also writes them. A future of (row, arrays, their image or None, the other
+    process's seconds by stage)."""
     if pool is None:
         with stages.stage("metrics"):
             scores, arrays = workers.score(task)
         row.update(scores)
+        if writing is not None:
+            return writing.submit(workers.write, row, arrays, grid, out_dir, _stem(row), _grid_attrs(grid),
+                                  None if store is None else str(store.root),
+                                  _arrays_attrs(grid, row["key"]) if owns_arrays else None)
         if store is not None:
             writer.submit(store.put, row["key"], row, arrays, _grid_attrs(grid))
         return workers.done((row, arrays, {}))
@@ -445,9 +497,11 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
 
 
 def _finish(result, rows: list[dict], index: int, out_dir: Path, grid: RadarGrid, store: Store | None,
-            key: str | None, results_csv: ResultsCsv, by_worker: bool, job_log) -> None:
+            key: str | None, results_csv: ResultsCsv, by_worker: bool, job_log, arrays_by_worker: bool = False
+            ) -> None:
     """On the writer thread, in capture order: the capture's scored row (waiting for its worker, which wrote its
-    depth files: `by_worker`) as entry `index` of the run's `rows`, and its files (`_write_outputs`)."""
+    depth files: `by_worker`, and its arrays into arrays.h5: `arrays_by_worker`) as entry `index` of the run's
+    `rows`, and its files (`_write_outputs`)."""
     row, arrays, worker_s = result.result()
     for stage, seconds in worker_s.items():
         stages.add_background(stage, seconds)
@@ -455,7 +509,8 @@ def _finish(result, rows: list[dict], index: int, out_dir: Path, grid: RadarGrid
     cached = rows[index]["cached"]
     entry = {**row, "cached": cached}
     rows[index] = entry
-    _write_outputs(out_dir, entry, arrays, grid, store, key, results_csv, depth_written=by_worker)
+    _write_outputs(out_dir, entry, arrays, grid, store, key, results_csv, depth_written=by_worker,
+                   arrays_written=arrays_by_worker)
     if not cached:
         job_log("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],
                 row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])
@@ -487,20 +542,20 @@ def _live_handlers() -> list[logging.Handler]:
 
 
 def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_filtered: bool, antenna_files,
-                  store: Store | None, grid_override, device: str, timing: str, identity: dict
+                  kept: Store | None, grid_override, device: str, timing: str, identity: dict
                   ) -> tuple[dict, workers.Scoring, RadarGrid]:
     """Read and reconstruct one capture frame: (row with its score columns empty, what scoring it needs, metric
-    grid)."""
+    grid). `kept`: where parsed meshes and ground truths are kept (`_kept_inputs`)."""
     def read(parts):
         with stages.stage("reading"):
-            return captures.read(capture_dir, frame, parts, empty_filtered, antenna_files, store)
+            return captures.read(capture_dir, frame, parts, empty_filtered, antenna_files, kept)
 
     capture = read(_method_parts(cfg.prior.name))
     with stages.stage("ground truth"):
-        key = None if store is None else captures.kept_key(store, capture_dir, frame, empty_filtered,
-                                                           capture.radar.grid)
+        key = None if kept is None else captures.kept_key(kept, capture_dir, frame, empty_filtered,
+                                                          capture.radar.grid)
         gt = captures.ground_truth(capture_dir, capture, lambda: read((*_method_parts(cfg.prior.name), "mesh")),
-                                   store, key)
+                                   kept, key)
     grid = capture.radar.grid
     row = {"object": capture.object_name, "distance": capture.distance_cm, "frame": capture.radar.index, **identity,
            "radar_time_s": capture.radar.timestamp_s, **_pairing_columns(capture, capture_dir)}
@@ -552,6 +607,8 @@ def main(cfg: DictConfig) -> None:
         validate.check(cfg)                                       # every setting in its range (one line if not)
         if cfg.store.dir is not None:
             cli.check_creatable_dir(to_absolute_path(str(cfg.store.dir)), f"store.dir={cfg.store.dir}")
+        elif OmegaConf.select(cfg, "store.cache", default=None) not in (None, "auto"):
+            cli.check_creatable_dir(kept_inputs_dir(cfg), f"store.cache={cfg.store.cache}")
         started = time.perf_counter()
         params = params_string(list(hydra_cfg.overrides.task))
         rows = run(cfg, out_dir, generate=synthetic_asked(list(hydra_cfg.overrides.task)),

@@ -2,11 +2,14 @@
 of a frame read once) and the ground truth (ray casts, silhouettes, KD-tree). With a result store, the parsed mesh
 is kept there by the content of its file (`<store>/meshes/`), so later sweeps need no Open3D to read it.
 
-The ground truth's rasters (the costly part: two ray casts of the mesh) are also kept on disk under the result
-store, `<store>/ground_truth/<key>.h5`, keyed like the store's cells by the content of the files they come from
-(metadata, alignment, mesh, the frame's pose, the radar calibration's grid) and the code version: a later sweep
-(another experiment on the same captures) reads two arrays instead of importing Open3D, reading the mesh and
-casting rays, and needs no mesh at all unless its prior is the photogrammetry one.
+The ground truth (its rasters, the costly part: two ray casts of the mesh, and what is derived from them: points,
+silhouettes, the reference profile's splat) is also kept on disk under the result store,
+`<store>/ground_truth/<key>.h5`, keyed like the store's cells by the content of the files it comes from (metadata,
+alignment, mesh, the frame's pose, the radar calibration's grid) and the code version: a later sweep (another
+experiment on the same captures) reads its arrays instead of importing Open3D, reading the mesh, casting rays and
+deriving them, and needs no mesh at all unless its prior is the photogrammetry one. A sweep without a result store
+keeps both in `store.cache` instead (bench.harness.app._kept_inputs; the user's cache folder by default). A kept
+file is checked as it is read and ignored, with a warning naming it, when it fails a check (`_read_kept`).
 """
 from __future__ import annotations
 
@@ -15,6 +18,8 @@ import dataclasses
 import functools
 import io
 import json
+import logging
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -26,11 +31,21 @@ from bench.harness.store import Store, code_version
 from bench.maroon import reader
 from bench.maroon.antennas import load_antenna_array
 from methods.domain.capture import Capture, Mesh
-from metrics.evaluate import GroundTruth, ground_truth_from_rasters, ground_truth_rasters_m
+from methods.domain.errors import DatasetError
+from metrics.evaluate import (
+    GroundTruth,
+    ground_truth_arrays,
+    ground_truth_from_arrays,
+    ground_truth_from_rasters,
+    ground_truth_rasters_m,
+)
 
 CAPTURES_KEPT = 16           # capture frames kept in memory (a sweep's captures: the paper's 8 at one distance)
 GROUND_TRUTHS_KEPT = 16
-RASTERS = ("depth_m", "reference_depth_m")
+log = logging.getLogger("bench")
+#: the arrays of a kept ground truth (metrics.evaluate.ground_truth_arrays) and their numpy dtype kinds
+GROUND_TRUTH_ARRAYS = {"depth_m": "f", "reference_depth_m": "f", "points_m": "f", "silhouette": "b",
+                       "eroded_silhouette": "b", "reference_points_m": "f", "reference_splat_mm": "f"}
 
 _CAPTURES: collections.OrderedDict = collections.OrderedDict()   # (frame key) -> (Capture, parts read)
 _GROUND_TRUTHS: collections.OrderedDict = collections.OrderedDict()
@@ -67,14 +82,76 @@ def read(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: 
 def kept_mesh(store: Store, path: Path) -> Mesh:
     """The mesh file `path` parsed (bench.maroon.reader.read_mesh: Open3D and its checks) the first time its
     content is seen, then read back from `<store>/meshes/<sha256 of the file>.h5` (vertices, triangles as
-    parsed): a sweep whose prior is the photogrammetry mesh then neither imports Open3D nor parses the OBJ."""
-    kept = store.root / "meshes" / f"{store.file_digest(path)}.h5"
-    if kept.is_file():
-        with h5py.File(kept, "r") as h5:
-            return Mesh(vertices=h5["vertices"][()], triangles=h5["triangles"][()], path=path)
+    parsed): a sweep whose prior is the photogrammetry mesh then neither imports Open3D nor parses the OBJ. A kept
+    file that fails a check (`_mesh_arrays`) is not used: a warning names it, and the OBJ is parsed and kept anew."""
+    digest = store.file_digest(path)
+    kept = store.root / "meshes" / f"{digest}.h5"
+    arrays = _read_kept(store, kept, digest, _mesh_arrays, "parsing the mesh file again")
+    if arrays is not None:
+        return Mesh(vertices=arrays["vertices"], triangles=arrays["triangles"], path=path)
     mesh = reader.read_mesh(path)
-    _keep(kept, {"vertices": mesh.vertices, "triangles": mesh.triangles})
+    _keep(kept, {"vertices": mesh.vertices, "triangles": mesh.triangles}, digest)
     return mesh
+
+
+def _mesh_arrays(path: Path, h5: h5py.File) -> dict[str, np.ndarray]:
+    """A kept mesh's arrays as `read_mesh` returned them: (N, 3) finite float64 vertices, (M, 3) integer triangles
+    indexing them; DatasetError naming `path` otherwise."""
+    vertices, triangles = (_dataset(path, h5, name, kind) for name, kind in (("vertices", "f"), ("triangles", "i")))
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or not len(vertices) or not np.isfinite(vertices).all():
+        raise DatasetError(path, f"'vertices' must be N x 3 finite numbers, found {vertices.shape}")
+    if triangles.ndim != 2 or triangles.shape[1] != 3 or not len(triangles) or triangles.min() < 0 \
+            or triangles.max() >= len(vertices):
+        raise DatasetError(path, f"'triangles' must be M x 3 indices of the {len(vertices)} vertices")
+    return {"vertices": vertices.astype(np.float64, copy=False), "triangles": triangles.astype(np.int64, copy=False)}
+
+
+def _ground_truth_arrays(path: Path, h5: h5py.File, shape: tuple[int, int]) -> dict[str, np.ndarray]:
+    """A kept ground truth's arrays (metrics.evaluate.ground_truth_arrays): float64 depth maps of the grid's `shape`
+    (NaN = no surface, else finite), a finite float64 splat of that shape, boolean silhouettes of that shape, finite
+    float64 N x 3 points; DatasetError naming `path` otherwise."""
+    arrays = {name: _dataset(path, h5, name, kind) for name, kind in GROUND_TRUTH_ARRAYS.items()}
+    for name, values in arrays.items():
+        kind = GROUND_TRUTH_ARRAYS[name]
+        if name.endswith("points_m"):
+            ok = values.ndim == 2 and values.shape[1] == 3 and values.dtype == np.float64 and np.isfinite(values).all()
+            wanted = "float64 N x 3 points"
+        else:
+            ok = values.shape == shape and values.dtype == (np.bool_ if kind == "b" else np.float64) and (
+                kind == "b" or not np.isinf(values).any()) and (name != "reference_splat_mm" or
+                                                                np.isfinite(values).all())
+            wanted = f"{'boolean' if kind == 'b' else 'float64'} map of {shape[0]} x {shape[1]} pixels"
+        if not ok:
+            raise DatasetError(path, f"{name!r} must be a {wanted}, found {values.dtype} {values.shape}")
+    return arrays
+
+
+def _dataset(path: Path, h5: h5py.File, name: str, kind: str) -> np.ndarray:
+    """Dataset `name` of numpy dtype kind `kind` ('f', 'b'; 'i': signed or unsigned integers), read whole."""
+    node = h5.get(name)
+    if not isinstance(node, h5py.Dataset) or node.dtype.kind not in (kind, "u" if kind == "i" else kind):
+        raise DatasetError(path, f"{name!r} is missing or not an array of "
+                                 f"{ {'f': 'numbers', 'b': 'booleans', 'i': 'indices'}[kind]}")
+    return node[()]
+
+
+def _read_kept(store: Store, path: Path, key: str, arrays: Callable, instead: str, *args) -> dict | None:
+    """The arrays of a file kept under `key` (`arrays(path, h5, *args)` checks and returns them), or None where
+    there is none or it is not usable (read through `Store.open_h5`: a regular file inside the store, of hard links
+    only; written for this `key`; its arrays as checked): then a warning names the file and what is done
+    `instead`. A file of the store is never trusted (it may hold anything: a killed writer's bytes, another key's
+    arrays, links to other files)."""
+    if not os.path.lexists(path):
+        return None
+    try:
+        with store.open_h5(path) as h5:
+            made_by = h5.attrs.get("key")
+            if made_by != key:
+                raise DatasetError(path, f"was written for another key ({str(made_by)[:16]}), not {key[:16]}")
+            return arrays(path, h5, *args)
+    except (DatasetError, OSError) as err:
+        log.warning("kept file %s is not usable, %s: %s", path, instead, " ".join(str(err).split()))
+        return None
 
 
 def _remember(key, gt: GroundTruth) -> GroundTruth:
@@ -97,13 +174,12 @@ def kept_key(store: Store, capture_dir: Path, frame: int, empty_filtered: bool, 
 
 
 def load_kept(store: Store, key: str, capture: Capture) -> GroundTruth | None:
-    """The ground truth kept under `key` for this capture frame (its radar part read), or None."""
-    path = store.root / "ground_truth" / f"{key}.h5"
-    if not path.is_file():
-        return None
-    with h5py.File(path, "r") as h5:
-        rasters = [h5[name][()] for name in RASTERS]
-    return ground_truth_from_rasters(*rasters, capture.radar.grid, capture.metadata)
+    """The ground truth kept under `key` for this capture frame (its radar part read), or None: none kept, or a
+    file that fails a check (`_read_kept`; a warning names it, and the rasters are cast again)."""
+    grid = capture.radar.grid
+    arrays = _read_kept(store, store.root / "ground_truth" / f"{key}.h5", key, _ground_truth_arrays,
+                        "casting the ground truth again", grid.image_shape)
+    return None if arrays is None else ground_truth_from_arrays(arrays, grid, capture.metadata)
 
 
 def ground_truth(capture_dir: Path, capture: Capture, with_mesh: Callable[[], Capture], store: Store | None = None,
@@ -131,16 +207,18 @@ def ground_truth(capture_dir: Path, capture: Capture, with_mesh: Callable[[], Ca
         rasters = ground_truth_rasters_m(meshed, grid)
         gt = ground_truth_from_rasters(*rasters, grid, meshed.metadata)
         if key is not None:
-            _keep(store.root / "ground_truth" / f"{key}.h5", dict(zip(RASTERS, rasters, strict=True)))
+            _keep(store.root / "ground_truth" / f"{key}.h5", ground_truth_arrays(gt), key)
     return _remember(memory_key, gt)
 
 
-def _keep(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write the arrays whole or not at all (bench.harness.atomic, as the store writes its cells)."""
+def _keep(path: Path, arrays: dict[str, np.ndarray], key: str) -> None:
+    """Write the arrays, and the `key` they are kept under, whole or not at all (bench.harness.atomic, as the store
+    writes its cells)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     image = io.BytesIO()
     with h5py.File(image, "w") as h5:
         for name, values in arrays.items():
             h5.create_dataset(name, data=values, compression="gzip", compression_opts=1, shuffle=True)
         h5.attrs["made_by"] = json.dumps({"code": code_version()})
+        h5.attrs["key"] = key
     atomic.write_bytes(path, image.getvalue())

@@ -111,8 +111,8 @@ def sources_key(root: Path = PACKAGE_ROOT) -> str:
     return digest.hexdigest()
 
 
-def default_cache_file() -> Path | None:
-    """The cache's file: $XDG_CACHE_HOME (when absolute) or ~/.cache, then mm2fsk-bench/code_version.json; None
+def default_cache_dir() -> Path | None:
+    """The user's cache folder of the package: $XDG_CACHE_HOME (when absolute) or ~/.cache, then mm2fsk-bench; None
     where neither is known (no HOME and no passwd entry, as in some containers): then nothing is cached."""
     base = os.environ.get("XDG_CACHE_HOME", "")
     if not os.path.isabs(base):
@@ -120,7 +120,13 @@ def default_cache_file() -> Path | None:
             base = Path.home() / ".cache"
         except RuntimeError:
             return None
-    return Path(base) / "mm2fsk-bench" / "code_version.json"
+    return Path(base) / "mm2fsk-bench"
+
+
+def default_cache_file() -> Path | None:
+    """The cache's file: code_version.json in `default_cache_dir()`."""
+    folder = default_cache_dir()
+    return None if folder is None else folder / "code_version.json"
 
 
 def cached_version(root: Path = PACKAGE_ROOT, cache_file: Path | None = None) -> str:

@@ -178,14 +178,25 @@ class Store:
     def _roots(self) -> tuple[Path, ...]:
         return (Path(os.path.realpath(self.root)),)
 
-    def _open_cell(self, key: str) -> h5py.File:
-        """The cell's HDF5 file, read into memory from a regular file inside the store and checked: only hard links
-        to datasets stored in the file, the arrays 2-D floats of the grid in its attributes."""
-        path = self.cells / f"{key}.h5"
+    def open_h5(self, path: Path) -> h5py.File:
+        """An HDF5 file of the store (a cell, a kept ground truth or mesh: bench.harness.captures), read into memory
+        from a regular file inside the store, holding only hard links to datasets stored in it (`check_links`); a
+        DatasetError naming the file otherwise."""
         try:
             h5 = h5py.File(io.BytesIO(safe_io.read_bytes(path, "frame", self._roots())), "r")
         except OSError as err:            # not HDF5, truncated
             raise DatasetError(path, f"unreadable HDF5 ({' '.join(str(err).split())})") from None
+        try:
+            check_links(path, h5)
+        except BaseException:
+            h5.close()
+            raise
+        return h5
+
+    def _open_cell(self, key: str) -> h5py.File:
+        """The cell's HDF5 file (`open_h5`), its arrays 2-D floats of the grid in its attributes."""
+        path = self.cells / f"{key}.h5"
+        h5 = self.open_h5(path)
         try:
             _check_cell(path, h5)
         except BaseException:
@@ -246,8 +257,10 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _check_cell(path: Path, h5: h5py.File) -> None:
-    """DatasetError naming `path` unless the cell's HDF5 holds only what `Store.put` writes (module doc)."""
+def check_links(path: Path, h5: h5py.File) -> None:
+    """DatasetError naming `path` where a top-level entry of `h5` is not a hard link, or a dataset is virtual or
+    stored externally: each could serve another file's data (a file of the store, or kept beside it, is read only
+    when it holds its own data)."""
     for name in h5:
         link = h5.get(name, getlink=True)
         if not isinstance(link, h5py.HardLink):
@@ -256,6 +269,11 @@ def _check_cell(path: Path, h5: h5py.File) -> None:
         if isinstance(node, h5py.Dataset) and (node.is_virtual or node.external):
             raise DatasetError(path, f"{name!r} is a {'virtual' if node.is_virtual else 'externally stored'} dataset "
                                      "(it could serve another file's data)")
+
+
+def _check_cell(path: Path, h5: h5py.File) -> None:
+    """DatasetError naming `path` unless the cell's HDF5 (its links checked) holds only what `Store.put` writes
+    (module doc)."""
     attrs = dict(h5.attrs)
     try:
         bb_min, bb_max = (np.asarray(attrs[k], dtype=np.float64) for k in ("bb_min_m", "bb_max_m"))

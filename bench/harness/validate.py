@@ -12,7 +12,8 @@ launcher's own settings before a multirun starts. The ranges:
 * grid.override: null, or xy_half_m and z_half_m above 0 and at most MAX_HALF_WIDTH_M, whole nxy >= 2 and nz >= 1
   within the grid limits (bench.maroon.limits: BENCH_LIMITS grid_pixels, grid_voxels), and a job whose modelled
   memory (bench.harness.resources) fits this machine's.
-* dataset.frame: what bench.maroon.frames accepts; dataset.captures: null or relative <object>/<distance> folders.
+* dataset.frame: what bench.maroon.frames accepts; dataset.captures: null or relative <object>/<distance> folders;
+  store.cache: auto, null or a folder (outside the dataset: bench.harness.app).
 * roi: what methods.skips.settings accepts, its switches true/false and its margins finite (steps above 0).
 * profile.prior: sound | faithful; booleans (dataset.empty_filtered, metrics.faithful) true/false.
 * evaluation.workers: auto, or a whole number from 0 to 4 x the CPUs (bench.harness.workers).
@@ -132,6 +133,9 @@ def _dataset(cfg: DictConfig) -> None:
             if not isinstance(name, (str, int)) or path.is_absolute() or ".." in path.parts or not path.parts:
                 _fail("dataset.captures", name, "a folder <object>/<distance> relative to dataset.root")
     boolean("dataset.empty_filtered", cfg.dataset.empty_filtered)
+    cache = OmegaConf.select(cfg, "store.cache", default=None)
+    if cache is not None and (not isinstance(cache, str) or not cache.strip()):
+        _fail("store.cache", cache, "auto, null or a folder")
 
 
 def _roi(cfg: DictConfig) -> None:

@@ -20,7 +20,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import multiprocessing
-import os
 import pickle
 import threading
 import time
@@ -31,10 +30,12 @@ import numpy as np
 
 from bench.harness.results import write_depth
 from methods.domain.capture import RadarGrid
+from metrics.chamfer import usable_cores
 from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
 
 MAX_AUTO_WORKERS = 6
+OUTPUT_PROCESS_MIN_CORES = 4
 HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: 'auto' leaves them every core
 # what a worker imports before it takes work (in the fork server: once for all workers): scoring, the cell's HDF5,
 # the KD-trees and the depth previews' colour map
@@ -104,22 +105,47 @@ def _store(root: str):
 
 def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None
                     ) -> tuple[dict, bytes | None, dict[str, float]]:
-    """In a worker: score the reconstruction into `row` (its score columns), write the depth PNG, JSON and preview
-    and, with a store, the cell (arrays, then the row). Returns (row, where there is no store to copy the arrays
-    from the cell's image, bench.harness.store.cell_image, else None, seconds spent on metrics and outputs)."""
-    from bench.harness.store import cell_image
-
+    """In a worker: score the reconstruction into `row` (its score columns), then `write` its files. Returns (row,
+    the arrays' image or None, seconds spent on metrics and outputs)."""
     started = time.perf_counter()
     scores, arrays = score(task)
     row.update(scores)
     scored = time.perf_counter()
-    write_depth(out_dir, stem, arrays["depth_m"], task.metric_grid)
+    row, image, seconds = write(row, arrays, task.metric_grid, out_dir, stem, grid_attrs, store_root)
+    return row, image, {"metrics": scored - started, **seconds}
+
+
+def write(row: dict, arrays: dict, grid: RadarGrid, out_dir: Path, stem: str, grid_attrs: dict,
+          store_root: str | None, arrays_attrs: dict | None = None) -> tuple[dict, bytes | None, dict[str, float]]:
+    """In a worker (or the output process, `output_process`): a scored capture's depth PNG, JSON and preview and,
+    with a store, its cell (arrays, then the row). Returns (row, where there is no store to copy the arrays from,
+    the cell's image, bench.harness.store.cell_image, else None, seconds spent on outputs). With `arrays_attrs`
+    (the output process of a run without a store: the one writer of the run's arrays.h5, its tasks done in order)
+    the arrays go into `out_dir/arrays.h5` here, with these attributes, and no image is returned."""
+    from bench.harness.store import cell_image, write_arrays
+
+    started = time.perf_counter()
+    write_depth(out_dir, stem, arrays["depth_m"], grid)
+    image = None
     if store_root is not None:
         _store(store_root).put(row["key"], row, arrays, grid_attrs)
-        image = None
+    elif arrays_attrs is not None:
+        write_arrays(out_dir / "arrays.h5", stem, arrays, arrays_attrs)
     else:
         image = cell_image(arrays, grid_attrs)
-    return row, image, {"metrics": scored - started, "outputs": time.perf_counter() - scored}
+    return row, image, {"outputs": time.perf_counter() - started}
+
+
+def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
+    """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays (without a
+    store: into arrays.h5): one process (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES
+    cores or more where the job runs alone, else None (the job's writer thread writes them, as on 2 cores, where a
+    process would take a core from the methods). A thread shares the interpreter lock with the main thread: on the
+    H100 host its PNG, preview and HDF5 work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind
+    the methods and metrics, and each job began by waiting for the last one's files (Table III: 5.2 s on the
+    thread, 1.3 s waited for). The rows stay timed as they were (the thread did the same work beside the timed
+    calls)."""
+    return None if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES else pool(1)
 
 
 def pool_size(setting, device: str, shared: bool = False) -> int:
@@ -128,7 +154,7 @@ def pool_size(setting, device: str, shared: bool = False) -> int:
     if setting == "auto":
         if device in HOST_DEVICES or shared:
             return 0
-        return max(0, min((os.cpu_count() or 1) - 2, MAX_AUTO_WORKERS))
+        return max(0, min(usable_cores() - 2, MAX_AUTO_WORKERS))
     return int(setting)
 
 

@@ -1,19 +1,22 @@
 """A whole experiment as a user runs it, its wall time beside its methods' and metrics' time, split by stage.
 
 `python -m bench.perf experiment NAME --root DIR [--device cpu|cuda] [--grid G] [--cells CELL ...] [--repeat N]
-[--set KEY=VALUE ...] [--out DIR]` runs `python -m bench -m experiment=NAME hydra/launcher=basic dataset=maroon
-dataset.root=DIR device=D` (one job at a time, as the demo runs it) in a fresh process with the stage clock on
-(bench.harness.stages): seconds in composing the jobs' configurations, imports, reading captures, the ground
-truth, the methods (`methods.reconstruct` calls: prior, warm-up, method), the metrics, the output files (on the
-main thread: what it waited for; `outputs (background)` is the writer thread's and the scoring workers' time,
-overlapped; with scoring workers, bench.harness.workers, the metrics are theirs, overlapped), the merge
-(tables and plots), and `other` (the interpreter, Hydra's start and its first composition, job set-up).
+[--set KEY=VALUE ...] [--no-store] [--out DIR]` runs `python -m bench -m experiment=NAME hydra/launcher=basic
+dataset=maroon dataset.root=DIR device=D` (one job at a time, as the demo runs it) in a fresh process with the stage
+clock on (bench.harness.stages): seconds in composing the jobs' configurations, imports, reading captures, the
+ground truth, the methods (`methods.reconstruct` calls: prior, warm-up, method), the metrics, the output files (on
+the main thread: what it waited for; `outputs (background)` is the writer thread's, the output process's and the
+scoring workers' time, overlapped; with scoring workers, bench.harness.workers, the metrics are theirs,
+overlapped), the merge (tables and plots), and `other` (the interpreter, Hydra's start and its first composition,
+job set-up).
 Runs: `cold`, a store that keeps nothing yet (the ground truth is cast from the meshes), then `--repeat` runs
 `kept` on the store it left with its cells removed (every cell computes again; the ground truth kept by content
-is read back, as a second experiment on the same captures finds it). The ratio printed is wall / (methods +
-metrics, the workers' scoring included); the targets (issue 29) are 1.3. `--set KEY=VALUE ...` passes further
-overrides to every run (e.g. `evaluation.workers=0`). Writes OUT/perf_experiment_<name>_<device>.csv (OUT =
-`--out`, default outputs/perf/), one row per run, with the machine's load.
+is read back, as a second experiment on the same captures finds it). `--no-store` runs as `store.dir=null` does
+(the command of the issue's end-to-end figures): `cold` with an empty `store.cache`, `kept` with the ground truths
+and meshes the cold run kept there. The ratio printed is wall / (methods + metrics, the workers' scoring
+included); the targets (issue 29) are 1.3. `--set KEY=VALUE ...` passes further overrides to every run (e.g.
+`evaluation.workers=0`). Writes OUT/perf_experiment_<name>_<device>.csv (OUT = `--out`, default outputs/perf/), one
+row per run, with the machine's load.
 """
 from __future__ import annotations
 
@@ -35,13 +38,15 @@ from bench.perf.common import add_out_option, write_rows
 STAGES = ("composition", "imports", "reading", "ground truth", "methods", "metrics", "outputs", "merge")
 
 
-def run_once(name: str, root: Path, device: str, extra: list[str], store: Path, work: Path) -> dict:
+def run_once(name: str, root: Path, device: str, extra: list[str], store: Path, work: Path, no_store: bool = False
+             ) -> dict:
     """One `python -m bench -m experiment=NAME` in a fresh process: wall seconds, seconds per stage, the summed
-    warm method runtimes of its rows and the load before it."""
+    warm method runtimes of its rows and the load before it. `no_store`: `store.dir=null`, `store` as the cache."""
     stages_file, sweep = work / "stages.json", work / "sweep"
     shutil.rmtree(sweep, ignore_errors=True)
+    kept = ["store.dir=null", f"store.cache={store}"] if no_store else [f"store.dir={store}"]
     command = [sys.executable, "-m", "bench", "-m", f"experiment={name}", "hydra/launcher=basic", "dataset=maroon",
-               f"dataset.root={root}", f"device={device}", f"store.dir={store}", f"hydra.sweep.dir={sweep}", *extra]
+               f"dataset.root={root}", f"device={device}", *kept, f"hydra.sweep.dir={sweep}", *extra]
     load_1m = os.getloadavg()[0]
     started = time.perf_counter()
     result = subprocess.run(command, env={**os.environ, ENV: str(stages_file)}, capture_output=True, text=True)
@@ -70,7 +75,8 @@ def _print(row: dict, label: str) -> None:
           f"load {row['load_1m_before']:.1f}", flush=True)
 
 
-def measure(name: str, root: Path, device: str, extra: list[str], repeat: int) -> list[dict]:
+def measure(name: str, root: Path, device: str, extra: list[str], repeat: int, no_store: bool = False
+            ) -> list[dict]:
     """The cold run, then `repeat` runs with the ground truth kept (module doc)."""
     rows = []
     with tempfile.TemporaryDirectory(prefix="perf_experiment-") as work:
@@ -78,7 +84,8 @@ def measure(name: str, root: Path, device: str, extra: list[str], repeat: int) -
         for i in range(repeat + 1):
             shutil.rmtree(store / "cells", ignore_errors=True)
             label = "cold" if i == 0 else "kept"
-            rows.append({"run": label, **run_once(name, root, device, extra, store, Path(work))})
+            rows.append({"run": label, "store": "off" if no_store else "on",
+                         **run_once(name, root, device, extra, store, Path(work), no_store)})
             _print(rows[-1], label)
     return rows
 
@@ -92,6 +99,8 @@ def main(argv=None) -> int:
     parser.add_argument("--cells", nargs="+", default=None, help="only these cells of the experiment")
     parser.add_argument("--repeat", type=cli.positive_int, default=1, help="runs with the ground truth kept")
     parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="further overrides of every run")
+    parser.add_argument("--no-store", action="store_true",
+                        help="run with store.dir=null, the ground truth kept in a store.cache of the runs")
     add_out_option(parser)
     args = parser.parse_args(argv)
     root = cli.existing_path(args.root, "dir", "--root").resolve()
@@ -99,7 +108,7 @@ def main(argv=None) -> int:
     out = cli.output_dir(args.out)
     extra = ([f"grid={args.grid}"] if args.grid else []) + ([f"cell={','.join(args.cells)}"] if args.cells else [])
     extra += args.set
-    rows = measure(args.name, root, device, extra, args.repeat)
+    rows = measure(args.name, root, device, extra, args.repeat, args.no_store)
     write_rows(rows, out / f"perf_experiment_{args.name}_{device}.csv")
     return 0
 

@@ -35,11 +35,13 @@ print(usage.ru_maxrss, os.waitstatus_to_exitcode(status))"""
 
 
 def job_peak_mib_measured(overrides: list[str]) -> tuple[float, float]:
-    """(peak RSS in MiB, wall seconds) of one `python -m bench` job with these overrides."""
+    """(peak RSS in MiB, wall seconds) of one `python -m bench` job with these overrides, nothing kept from earlier
+    runs (no store, `store.cache=null`: the ground truth is cast, Open3D imported, as in a job's first run)."""
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
         proc = subprocess.run([sys.executable, "-c", WAIT4, sys.executable, "-m", "bench", *overrides,
-                               "store.dir=null", f"hydra.run.dir={tmp}/run"], capture_output=True, text=True)
+                               "store.dir=null", "store.cache=null", f"hydra.run.dir={tmp}/run"],
+                              capture_output=True, text=True)
         wall_s = time.perf_counter() - start
     maxrss_kib, code = map(int, proc.stdout.split()[-2:]) if proc.returncode == 0 else (0, proc.returncode)
     if code != 0:

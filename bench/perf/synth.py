@@ -1,7 +1,7 @@
 """Synthetic capture generation, by stage, with the radar echo from frequency nodes and computed at every frequency.
 
 `python -m bench.perf synth [--objects NAME ...] [--distance CM] [--preset realistic|ideal] [--paths nodes direct]
-[--device cpu|cuda] [--out DIR]` builds each capture (`bench.synth.generate.build_capture`, into a temporary
+[--device cpu|cuda] [--out DIR]` builds each capture (`bench.synth.parts.build_capture`, into a temporary
 folder, no cache) once per path: `nodes` is the generator as it is (each block of scatterers at a few node
 frequencies, interpolated: bench.synth.radar.frequency_nodes), `direct` computes every frequency (what generator
 version 7 did, per-frequency products); `--device` is where the radar sums run (as `python -m bench.synth
@@ -12,8 +12,9 @@ frames are compared (same seeds, so the same noise): the largest difference over
 against the thermal noise of the frames in dB. Writes OUT/perf_synth.csv (OUT: `--out`, default outputs/perf).
 
 `--workers N [N ...]` times instead what a user waits for: `generate_catalogue` of the objects at the distance into
-a fresh root, building N captures at once (default: as many as the generator builds, `capture_workers()`), wall and
-process CPU seconds: OUT/perf_synth_catalogue.csv.
+a fresh root, building N capture parts at once (default: as many as the generator builds, `capture_workers()`), in
+worker processes or threads (`--builders`; default as the generator chooses: bench.synth.workers), wall and CPU
+seconds of this process (not its worker processes): OUT/perf_synth_catalogue.csv.
 """
 from __future__ import annotations
 
@@ -85,7 +86,7 @@ def radar_path(path: str):
 
 def build(object_name: str, distance_cm: int, config, path: str, work: Path, device: str = "cpu") -> dict:
     """Build one capture on `path` into `work`; its row: wall and CPU seconds in all and per stage."""
-    from bench.synth.generate import build_capture
+    from bench.synth.parts import build_capture
 
     spent = collections.defaultdict(lambda: [0.0, 0.0])
     target = work / path / object_name
@@ -118,22 +119,29 @@ def frame_difference(nodes_dir: Path, direct_dir: Path, config) -> dict:
             "rms_diff_over_noise_db": 20.0 * np.log10(rms / noise) if rms > 0 and noise > 0 else float("nan")}
 
 
-def catalogue(objects: list[str], distance_cm: int, config, workers: int, work: Path, device: str = "cpu") -> dict:
-    """Wall and CPU seconds of generate_catalogue into a fresh root, `workers` captures at once."""
+def catalogue(objects: list[str], distance_cm: int, config, workers: int, work: Path, device: str = "cpu",
+              builders: str = "default") -> dict:
+    """Wall and CPU seconds of generate_catalogue into a fresh root, `workers` capture parts at once, in worker
+    processes or threads (`builders`; "default": as the generator chooses, bench.synth.workers)."""
     from bench.synth import generate
+    from bench.synth import workers as pool
 
-    default = generate.capture_workers
-    generate.capture_workers = lambda: workers
+    defaults = pool.capture_workers, pool.capture_processes
+    pool.capture_workers = lambda: workers
+    if builders != "default":
+        pool.capture_processes = lambda: builders == "processes"
+    used = "processes" if pool.capture_processes() else "threads"
     try:
         wall, cpu = time.perf_counter(), time.process_time()
         generate.generate_catalogue(Path(tempfile.mkdtemp(prefix=f"workers{workers}-", dir=work)), [distance_cm],
                                     objects, config, device=device)
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     finally:
-        generate.capture_workers = default
-    print(f"generate_catalogue ({device}): {len(objects)} captures, {workers} at once: {wall:.1f} s wall, "
-          f"{cpu:.1f} s CPU")
-    return {"device": device, "captures": len(objects), "workers": workers, "wall_s": wall, "cpu_s": cpu}
+        pool.capture_workers, pool.capture_processes = defaults
+    print(f"generate_catalogue ({device}, {used}): {len(objects)} captures, {workers} parts at once: {wall:.1f} s "
+          f"wall, {cpu:.1f} s CPU in this process")
+    return {"device": device, "builders": used, "captures": len(objects), "workers": workers, "wall_s": wall,
+            "cpu_s": cpu}
 
 
 def _print(rows: list[dict]) -> None:
@@ -162,6 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--paths", nargs="+", choices=PATHS, default=list(PATHS), help="radar paths to time")
     parser.add_argument("--workers", type=cli.positive_int, nargs="*", default=None,
                         help="time generate_catalogue building this many captures at once (none given: the default)")
+    parser.add_argument("--builders", choices=["default", "processes", "threads"], default="default",
+                        help="with --workers: build in worker processes or threads (default: as the generator does)")
     parser.add_argument("--device", default="cpu", help="where the radar sums run: cpu (NumPy) or cuda (Warp)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="folder for the CSV")
     args = parser.parse_args(argv)
@@ -173,11 +183,11 @@ def main(argv: list[str] | None = None) -> int:
     import open3d  # noqa: F401  - imported before timing (the generator's ray casting imports it on first use)
 
     if args.workers is not None:
-        from bench.synth.generate import capture_workers
+        from bench.synth.workers import capture_workers
 
         with tempfile.TemporaryDirectory(prefix="perf-synth-") as tmp:
-            rows = [catalogue(args.objects, args.distance, config, n, Path(tmp), device) for n in args.workers or
-                    [capture_workers()]]
+            rows = [catalogue(args.objects, args.distance, config, n, Path(tmp), device, args.builders)
+                    for n in args.workers or [capture_workers()]]
         write_rows(rows, args.out / "perf_synth_catalogue.csv")
         return 0
     rows = []

@@ -11,6 +11,7 @@ import sys
 import time
 
 from bench import cli
+from bench.synth import workers
 from bench.synth.config import DEFAULT_PRESET, DISTANCE_RANGE_CM, PRESETS, SynthConfig, preset
 from bench.synth.generate import DEFAULT_DISTANCES_CM, CaptureResult, generate_catalogue
 from bench.synth.motion import MOTIONS
@@ -48,6 +49,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
+    workers.prestart()        # worker processes' imports, beside this process's start-up
     unknown = [o for o in (args.objects or []) if o not in FULL_CATALOGUE]
     if unknown:
         parser.error(f"unknown object(s) {', '.join(unknown)}; known: {', '.join(FULL_CATALOGUE)}")

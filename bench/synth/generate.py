@@ -10,6 +10,7 @@ generate each capture once; temp folders left by a dead process are removed befo
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -17,29 +18,20 @@ import threading
 import time
 import uuid
 from collections.abc import Callable, Iterable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
-from bench.synth import motion, ownership, writer
-from bench.synth.camera import depth as depth_camera
-from bench.synth.camera import photogrammetry
-from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash, capture_rng, frequencies_hz
-from bench.synth.meshes import rotation_matrix
-from bench.synth.radar import scene as radar_scene
-from bench.synth.radar.leg_sum import PARTIAL_SUMS, single_threaded_blas
-from bench.synth.scenes import CATALOGUE, FULL_CATALOGUE, build_scene
+from bench.synth import motion, ownership, workers
+from bench.synth.config import DISTANCE_RANGE_CM, SynthConfig, capture_hash
+from bench.synth.parts import CAPTURE_PARTS, build_part
+from bench.synth.radar.leg_sum import single_threaded_blas
+from bench.synth.scenes import CATALOGUE, FULL_CATALOGUE
 
 MANIFEST_NAME = ownership.MANIFEST_NAME
 # where the radar sums run: "cpu" NumPy (the default: the demo's data do not depend on the machine), "cuda" and
 # "warp-cpu" Warp (bench.synth.radar.warp_sum; frames within docs/measurements/synth.md's tolerance of NumPy's)
 RADAR_DEVICES = ("cpu", "cuda", "warp-cpu")
 DEFAULT_DISTANCES_CM = (30, 40, 50)
-START_TIME_NS = 1_700_000_000_000_000_000
-FRAME_PERIOD_NS = 33_333_333          # 30 fps RealSense; radar frames stamped at the same instants
-RADAR2WORLD = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 1.2], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
 
 
 @dataclass(frozen=True)
@@ -49,78 +41,6 @@ class CaptureResult:
     path: Path
     status: str
     seconds: float
-
-
-def _rigid(rotation: np.ndarray, translation_m) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, :3], m[:3, 3] = rotation, translation_m
-    return m
-
-
-def _photogrammetry2radar(rng: np.random.Generator) -> np.ndarray:
-    """A random proper rigid map (rotation 25-60 deg about a random axis, translation up to 0.5 m)."""
-    return _rigid(rotation_matrix(rng.normal(size=3), rng.uniform(25.0, 60.0)), rng.uniform(-0.5, 0.5, 3))
-
-
-def _radar_frames(scene, config: SynthConfig, rng: np.random.Generator, device: str = "cpu"):
-    """Yield (raw, emptyfiltered) complex64 (96, 96, F) per frame (bench.synth.radar.scene), summed on `device`."""
-    return radar_scene.frames(scene, config, rng, device)
-
-
-def _registration_residual(config: SynthConfig, rng: np.random.Generator) -> np.ndarray:
-    """4x4 radar-space error of the photogrammetry mesh's registration: a rotation of exactly `gt_registration_deg`
-    about a random axis through the radar origin and a shift of exactly `gt_registration_mm` in a random direction
-    (identity when both are 0; no random draw then, so the ideal generator's streams are unchanged)."""
-    if not (config.gt_registration_mm or config.gt_registration_deg):
-        return np.eye(4)
-    axis, direction = rng.normal(size=3), rng.normal(size=3)
-    return _rigid(rotation_matrix(axis, config.gt_registration_deg),
-                  direction / np.linalg.norm(direction) * config.gt_registration_mm * 1e-3)
-
-
-def build_capture(capture_dir: Path, object_name: str, distance_cm: int, config: SynthConfig,
-                  device: str = "cpu") -> None:
-    """Write every file of one capture into `capture_dir` (which must not exist yet); the radar sums on `device`
-    (RADAR_DEVICES)."""
-    distance_m = distance_cm / 100.0
-    scene = build_scene(object_name, distance_m)
-    if config.mount:
-        scene = scene.with_mount()
-    capture_dir.mkdir(parents=True)
-    sequence = motion.plan(config, START_TIME_NS, FRAME_PERIOD_NS)    # frame times, object offsets per frame
-
-    radar_rng = capture_rng(config, object_name, distance_cm, "radar")
-    freqs = frequencies_hz(config)
-    def simulate(scene_, config_, rng_):
-        return _radar_frames(scene_, config_, rng_, device)
-
-    for i, (raw, filtered) in enumerate(motion.radar_frames(simulate, scene, config, sequence, radar_rng)):
-        writer.write_radar_frame(capture_dir, i, raw, filtered, freqs, config.frames,
-                                 sequence.radar_times_ns[i] // 1000)
-    writer.write_radar_calibration(capture_dir, writer.radar_grid(distance_m), config.frames, config.frequency_points)
-
-    camera_rng = capture_rng(config, object_name, distance_cm, "camera")
-    nominal = depth_camera.nominal_pose(config)
-    true_pose = depth_camera.perturbed_pose(nominal, config, camera_rng)
-    for i, offset_m in enumerate(sequence.realsense_offsets_m):
-        frame = depth_camera.render(motion.moved(scene, offset_m), true_pose, config, camera_rng)
-        writer.write_realsense_frame(capture_dir, i, frame.depth_mm, frame.mask, frame.rgb)
-    writer.write_realsense_meta(capture_dir, depth_camera.intrinsics(config), sequence.realsense_times_ns)
-
-    photo_rng = capture_rng(config, object_name, distance_cm, "photogrammetry")
-    photo2radar = _photogrammetry2radar(photo_rng)
-    rs2radar = nominal.realsense2radar()
-    # the mesh is registered with a residual: the stored photogrammetry2radar maps it slightly off the true object
-    true_photo2radar = _registration_residual(config, photo_rng) @ photo2radar
-    # the mesh as MAROON's pipeline delivers it: reconstructed, then Laplacian-smoothed (photogrammetry.smoothed_mesh)
-    truth_m = photogrammetry.smoothed_mesh(scene.tris_m, config.gt_smoothing_steps, config.gt_mesh_subdivisions)
-    mesh_photo = (truth_m - true_photo2radar[:3, 3]) @ true_photo2radar[:3, :3]   # R^T (p - t), row vectors
-    writer.write_mesh_obj(capture_dir / "photogrammetry" / "mesh_masked_smoothed.obj", mesh_photo)
-    writer.write_alignment(capture_dir, {"realsense2radar": rs2radar, "photogrammetry2radar": photo2radar,
-                                         "photogrammetry2realsense": np.linalg.inv(rs2radar) @ photo2radar,
-                                         "radar2world": np.array(RADAR2WORLD)})
-    writer.write_metadata(capture_dir, distance_m, scene.label)
-    motion.write_poses(capture_dir, sequence, photo2radar)          # a moving object's ground truth per radar frame
 
 
 class _Manifest:
@@ -168,37 +88,64 @@ def _check(object_name: str, distance_cm: int, config: SynthConfig, device: str 
         raise ValueError(f"distance {distance_cm} cm is outside {DISTANCE_RANGE_CM[0]}..{DISTANCE_RANGE_CM[1]} cm")
 
 
-def _ensure_locked(root: Path, object_name: str, distance_cm: int, config: SynthConfig,
-                   force: bool, device: str = "cpu") -> CaptureResult:
-    """ensure_capture's work; the caller has claimed `root` and holds its lock."""
+@dataclass(frozen=True)
+class _Pending:
+    """A capture to build: its manifest key and hash, its folder, the temp folder its parts are written into."""
+
+    key: str
+    digest: str
+    target: Path
+    tmp: Path
+    start: float
+
+
+def _prepare(root: Path, object_name: str, distance_cm: int, config: SynthConfig, force: bool,
+             device: str) -> CaptureResult | _Pending:
+    """The cached capture, or an empty temp folder to build it in; the caller has claimed `root` and holds its
+    lock."""
     start = time.perf_counter()
     target = root / object_name / str(int(distance_cm))
     key, digest = f"{object_name}/{int(distance_cm)}", capture_hash(config, object_name, distance_cm, device)
-    manifest = _Manifest(root)
-    recorded = manifest.read().get(key, {})
+    recorded = _Manifest(root).read().get(key, {})
     if not force and target.is_dir() and recorded.get("hash") == digest:
         return CaptureResult(target, "cached", time.perf_counter() - start)
     if target.exists():
         ownership.check_replaceable(target, recorded)
     target.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(target.parent, distance_cm)
-    token = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    tmp = target.parent / f".{distance_cm}.tmp-{token}"
-    try:
-        build_capture(tmp, object_name, int(distance_cm), config, device)
-        if target.exists():
-            old = target.parent / f".{distance_cm}.old-{token}"
-            os.rename(target, old)
-            os.rename(tmp, target)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.rename(tmp, target)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    seconds = time.perf_counter() - start
-    manifest.record(key, {"hash": digest, "config": config.to_dict(), "device": device, "seconds": round(seconds, 3),
-                          "content": ownership.content_digest(target)})
+    tmp = target.parent / f".{distance_cm}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    tmp.mkdir()
+    return _Pending(key, digest, target, tmp, start)
+
+
+def _finish(root: Path, pending: _Pending, config: SynthConfig, device: str) -> CaptureResult:
+    """Move the built temp folder into place (replacing an old capture) and record it in the manifest."""
+    target, tmp = pending.target, pending.tmp
+    if target.exists():
+        old = tmp.with_name(tmp.name.replace(".tmp-", ".old-", 1))
+        os.rename(target, old)
+        os.rename(tmp, target)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.rename(tmp, target)
+    seconds = time.perf_counter() - pending.start
+    _Manifest(root).record(pending.key, {"hash": pending.digest, "config": config.to_dict(), "device": device,
+                                         "seconds": round(seconds, 3), "content": ownership.content_digest(target)})
     return CaptureResult(target, "generated", seconds)
+
+
+def _ensure_locked(root: Path, object_name: str, distance_cm: int, config: SynthConfig,
+                   force: bool, device: str = "cpu") -> CaptureResult:
+    """ensure_capture's work, in this thread; the caller has claimed `root` and holds its lock."""
+    plan = _prepare(root, object_name, distance_cm, config, force, device)
+    if isinstance(plan, CaptureResult):
+        return plan
+    try:
+        for part in CAPTURE_PARTS:
+            build_part(plan.tmp, part, object_name, distance_cm, config, device)
+        return _finish(root, plan, config, device)
+    finally:
+        shutil.rmtree(plan.tmp, ignore_errors=True)
 
 
 DEFAULT_CONFIG = SynthConfig()     # frozen: one shared default instance
@@ -233,8 +180,9 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
     the radar sums on `device` (ensure_capture).
 
     Holds the root's lock throughout: a concurrent call waits (`on_wait()` is called once when it has to) and
-    then finds the captures cached. Builds `capture_workers()` captures at once (threads; every capture draws from
-    its own seeded streams and sums in a fixed order, so its files do not depend on this); `log` sees them in order.
+    then finds the captures cached. Builds the captures' parts (parts.CAPTURE_PARTS), `workers.capture_workers()`
+    at once, in worker processes or threads (bench.synth.workers; every part draws from its own seeded streams and
+    sums in a fixed order, so the files do not depend on this); `log` sees the captures in order.
     Raises ownership.ForeignRootError for a root with other data.
     """
     pairs = [(o, int(d)) for o in (list(objects) if objects is not None else list(CATALOGUE)) for d in distances]
@@ -244,26 +192,32 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
     ownership.claim(root)
     unique = list(dict.fromkeys(pairs))       # a capture asked for twice is built once
     done: dict[tuple[str, int], CaptureResult] = {}
-    # BLAS single-threaded throughout: calls from captures built at once into a multi-threaded OpenBLAS contend
-    # (its workers busy-wait); the captures' own threads use the cores
-    with (ownership.exclusive(root, on_wait), single_threaded_blas(),
-          ThreadPoolExecutor(min(capture_workers(), len(unique))) as pool):
-        futures = [pool.submit(_ensure_locked, root, o, d, config, force, device) for o, d in unique]
+    # BLAS single-threaded throughout (in worker processes too): calls from captures built at once into a
+    # multi-threaded OpenBLAS contend (its workers busy-wait); the captures' own threads use the cores
+    with ownership.exclusive(root, on_wait), single_threaded_blas():
+        plans = {pair: _prepare(root, *pair, config, force, device) for pair in unique}
+        pending = {pair: plan for pair, plan in plans.items() if isinstance(plan, _Pending)}
         try:
-            for pair, future in zip(unique, futures, strict=True):
-                done[pair] = future.result()
-                if log is not None:
-                    log(done[pair])
-        except BaseException:
-            pool.shutdown(cancel_futures=True)
-            raise
+            with (workers.builders(min(workers.capture_workers(), len(pending) * len(CAPTURE_PARTS)), device)
+                  if pending else contextlib.nullcontext()) as submit:
+                # every capture's radar part first (the longest), then the cameras, then the ground truths
+                parts = {(pair, part): submit(build_part, plan.tmp, part, *pair, config, device)
+                         for part in CAPTURE_PARTS for pair, plan in pending.items()}
+                try:
+                    for pair in unique:
+                        if pair in pending:
+                            for part in CAPTURE_PARTS:
+                                parts[pair, part].result()
+                            plans[pair] = _finish(root, pending.pop(pair), config, device)
+                        done[pair] = plans[pair]
+                        if log is not None:
+                            log(done[pair])
+                except BaseException:
+                    for future in parts.values():
+                        future.cancel()
+                    raise
+        finally:              # after the builders have stopped: nothing writes into these any more
+            for plan in pending.values():
+                shutil.rmtree(plan.tmp, ignore_errors=True)
     return [done[pair] for pair in pairs]
 
-
-def capture_workers() -> int:
-    """Captures built at once: one per leg_sum.PARTIAL_SUMS cores and at least two, so that one capture's
-    single-threaded stages (ray casting, camera, files) overlap the others' radar sums (which share one pool of a
-    thread per core, bench.synth.radar.leg_sum): on 2 almost quiet cores the 8 captures took 17.0 s against 21.0 s
-    one at a time (at load ~10 it was the other way round: docs/measurements/synth.md)."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(2, cores // PARTIAL_SUMS)

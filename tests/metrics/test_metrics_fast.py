@@ -65,3 +65,55 @@ def test_nearest_distances_off_a_lattice_surface_match_brute_force():
     queries[:, 2] += rng.uniform(-0.02, 0.15, len(queries))          # wrapped depths land cm off the surface
     brute = np.sqrt(np.min(((queries[:, None, :] - surface[None, :, :]) ** 2).sum(axis=2), axis=1))
     np.testing.assert_allclose(nearest_distances_m(queries, PointSet(surface)), brute, rtol=1e-12, atol=0)
+
+
+def _brute_nearest_m(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """float64 nearest distances summed in the KD-tree's order ((dx^2 + dy^2) + dz^2): equal to it bit for bit."""
+    d = src[:, None, :] - dst[None, :, :]
+    return np.sqrt((d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]).min(axis=1)
+
+
+def test_c_s_and_off_err_from_one_query_equal_two_queries_and_brute_force():
+    from metrics.evaluate import _c_s_and_off_err_cm
+
+    rng = np.random.default_rng()
+    x, y = np.meshgrid(np.arange(-0.04, 0.04, 1e-3), np.arange(-0.03, 0.03, 1e-3))
+    for _ in range(5):
+        keep = rng.random(x.size) < 0.7
+        gt = PointSet(np.column_stack([x.ravel(), y.ravel(), 0.3 + 0.1 * x.ravel() ** 2])[keep])
+        radar = np.column_stack([x.ravel(), y.ravel(), 0.3 + rng.uniform(-0.05, 0.1, x.size)])
+        radar = radar[rng.random(x.size) < 0.5]
+        off = rng.random(len(radar)) < rng.uniform(0.05, 0.6)
+        c_s_cm, off_err_cm = _c_s_and_off_err_cm(radar, off, gt, gt)
+        distances_m = _brute_nearest_m(radar, gt.points_m)
+        assert c_s_cm == float(np.mean(distances_m)) * 100.0
+        assert off_err_cm == float(np.mean(_brute_nearest_m(radar[off], gt.points_m))) * 100.0
+        assert off_err_cm == float(np.mean(nearest_distances_m(radar[off], gt))) * 100.0   # the query it replaces
+        other = PointSet(gt.points_m[::2])                  # the faithful profile: C_s to other points, off_err not
+        c_s_cm, off_err_cm = _c_s_and_off_err_cm(radar, off, other, gt)
+        assert c_s_cm == float(np.mean(_brute_nearest_m(radar, other.points_m))) * 100.0
+        assert off_err_cm == float(np.mean(distances_m[off])) * 100.0
+    none = np.zeros(0, dtype=bool)
+    assert all(np.isnan(_c_s_and_off_err_cm(np.zeros((0, 3)), none, gt, gt)))
+    c_s_cm, off_err_cm = _c_s_and_off_err_cm(radar[:5], np.zeros(5, dtype=bool), gt, gt)
+    assert np.isfinite(c_s_cm) and np.isnan(off_err_cm)
+
+
+def test_queries_run_on_the_cores_the_process_may_use_not_the_hosts(monkeypatch):
+    from metrics import chamfer
+
+    threads = []
+    points = PointSet(np.random.default_rng().random((50, 3)))
+
+    class Tree:
+        def query(self, src, k, workers):
+            threads.append(workers)
+            return np.zeros(len(src)), None
+
+    points._tree = Tree()
+    monkeypatch.setattr(chamfer.os, "sched_getaffinity", lambda pid: {0, 3, 5}, raising=False)
+    monkeypatch.setattr(chamfer.os, "cpu_count", lambda: 224)
+    nearest_distances_m(np.zeros((4, 3)), points)
+    monkeypatch.setattr(chamfer, "QUERY_THREADS", 1)                 # a scoring worker's setting
+    nearest_distances_m(np.zeros((4, 3)), points)
+    assert threads == [3, 1]

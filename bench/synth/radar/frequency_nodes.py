@@ -17,10 +17,12 @@ complex64 rounding is amplified. Where no M <= MAX_NODE_SHARE F meets both, the 
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import numpy as np
 
 from bench.synth.config import C_M_PER_S
+from bench.synth.radar import fit_cache
 
 NODE_ERROR = 1e-6          # interpolation error per unit scatterer weight (complex64 sums round at ~1e-7 of it)
 NODE_GAIN = 6.0            # most that L's rows may amplify the nodes' rounding
@@ -45,6 +47,19 @@ def interpolator(freqs_hz: np.ndarray, half_width_m: float) -> tuple[np.ndarray,
 
 @functools.lru_cache(maxsize=128)
 def _fit(freqs_hz: tuple[float, ...], half_width_m: float, max_nodes: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """_fitted, kept in memory and on disk (bench.synth.radar.fit_cache)."""
+    name = fit_cache.key(_SOURCE, freqs_hz, half_width_m, max_nodes)
+    kept = fit_cache.load(name)
+    if kept is None:
+        kept = _fitted(freqs_hz, half_width_m, max_nodes)
+        fit_cache.store(name, *kept)
+    return kept
+
+
+_SOURCE = Path(__file__).read_bytes()      # the fitting code: a kept fit is one this code made
+
+
+def _fitted(freqs_hz: tuple[float, ...], half_width_m: float, max_nodes: int) -> tuple[np.ndarray, np.ndarray | None]:
     freqs = np.asarray(freqs_hz)
     centre_hz = 0.5 * (freqs.min() + freqs.max())
     offsets_m = np.linspace(-half_width_m, half_width_m, _FIT_POINTS)

@@ -116,11 +116,20 @@ class _BlasLimit:
 single_threaded_blas = _BlasLimit()
 
 
+_thread_limit: list[int] = []      # set in worker processes that share the cores (bench.synth.workers)
+
+
+def limit_threads(count: int) -> None:
+    """Give the block pool `count` threads (at least PARTIAL_SUMS) instead of one per core; call before the first
+    sum. The frames do not depend on it (module doc)."""
+    _thread_limit[:] = [count]
+
+
 @functools.cache
 def _threads() -> int:
-    """Threads of the block pool: one per core, at least PARTIAL_SUMS."""
+    """Threads of the block pool: one per core (or limit_threads's count), at least PARTIAL_SUMS."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(PARTIAL_SUMS, cores)
+    return max(PARTIAL_SUMS, *_thread_limit[:1] or [cores])
 
 
 @functools.cache

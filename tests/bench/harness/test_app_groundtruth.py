@@ -13,7 +13,7 @@ def _cfg(synth_root, *overrides):
     with initialize_config_dir(config_dir=str(app.CONFIG_DIR), version_base="1.3"):
         return compose(config_name="config", overrides=["dataset=maroon", f"dataset.root={synth_root}",
                                                       "dataset.captures=[01_plate/30]", "store.dir=null",
-                                                      *overrides])
+                                                      "store.cache=null", *overrides])
 
 
 def test_ground_truth_is_built_once_per_capture_for_every_cell(synth_root, tmp_path, monkeypatch):

@@ -57,7 +57,7 @@ def test_kept_ground_truth_scores_like_a_fresh_one_without_reading_the_mesh(synt
         monkeypatch.setattr(captures, "_GROUND_TRUTHS", type(captures._GROUND_TRUTHS)())
 
     fresh_process()
-    (plain,) = app.run(_cfg(synth_root, "null", "cell=mm2fsk_d10"), tmp_path / "plain")
+    (plain,) = app.run(_cfg(synth_root, "null", "cell=mm2fsk_d10", "store.cache=null"), tmp_path / "plain")
     fresh_process()
     app.run(_cfg(synth_root, tmp_path / "store", "cell=2fsk_d05"), tmp_path / "first")
     assert len(casts) == 2 and len(list((tmp_path / "store" / "ground_truth").glob("*.h5"))) == 1

@@ -79,13 +79,47 @@ def test_rows_and_files_scored_by_workers_are_those_scored_in_the_main_thread(ro
     assert {r["timing"] for r in rows[1]} == {"parallel"} and {r["timing"] for r in rows[0]} <= {"alone", "contended"}
 
 
-@pytest.mark.parametrize(("cores", "expected"), [(16, workers.MAX_AUTO_WORKERS), (5, 3), (2, 0), (None, 0)])
+@pytest.mark.parametrize(("cores", "expected"), [(16, workers.MAX_AUTO_WORKERS), (5, 3), (2, 0), (1, 0)])
 def test_pool_sizes(monkeypatch, cores, expected):
-    monkeypatch.setattr(workers.os, "cpu_count", lambda: cores)
+    monkeypatch.setattr(workers, "usable_cores", lambda: cores)
     assert workers.pool_size("auto", "cuda") == expected
     assert workers.pool_size("auto", "cpu") == 0
     assert workers.pool_size("auto", "cuda", shared=True) == 0          # jobs side by side: their cores
     assert workers.pool_size(3, "cpu") == 3
+    process = workers.output_process()
+    assert (process is not None) == (cores >= workers.OUTPUT_PROCESS_MIN_CORES)
+    assert workers.output_process(shared=True) is None
+
+
+@pytest.mark.parametrize("with_store", [True, False])
+def test_files_written_by_the_output_process_are_the_writer_threads(root, tmp_path, monkeypatch, with_store):
+    """Without scoring workers, a host of OUTPUT_PROCESS_MIN_CORES cores writes each capture's depth files, cell and
+    compressed arrays (without a store: into arrays.h5) in one process instead of the writer thread: the same rows,
+    files, arrays and cells, and the rows timed as before (alone, or contended on a busy machine)."""
+    rows, stores, handed = {}, {}, []
+    monkeypatch.setattr(workers, "OUTPUT_PROCESS_MIN_CORES", 1)
+    process = workers.output_process()
+    submit = process.submit
+    monkeypatch.setattr(process, "submit", lambda fn, *args: handed.append((fn.__name__, args[-1] is not None)) or
+                        submit(fn, *args))
+    for name, min_cores in (("thread", 10**6), ("process", 1)):
+        monkeypatch.setattr(workers, "OUTPUT_PROCESS_MIN_CORES", min_cores)
+        stores[name] = tmp_path / f"store_{name}" if with_store else None
+        rows[name] = _run(root, tmp_path / name, stores[name], 0)
+    pd.testing.assert_frame_equal(_stable(pd.DataFrame(rows["process"])), _stable(pd.DataFrame(rows["thread"])))
+    tables = {name: pd.read_csv(tmp_path / name / "results.csv") for name in rows}
+    pd.testing.assert_frame_equal(_stable(tables["process"]), _stable(tables["thread"]))
+    assert _files(tmp_path / "process") == _files(tmp_path / "thread") and _files(tmp_path / "thread")
+    arrays = {name: _arrays(tmp_path / name / "arrays.h5") for name in rows}
+    assert arrays["process"].keys() == arrays["thread"].keys() and len(arrays["thread"]) == 6
+    for name, values in arrays["thread"].items():
+        np.testing.assert_array_equal(arrays["process"][name], values)
+    if with_store:                   # the cells the process wrote serve the next run
+        assert len(list((stores["process"] / "cells").glob("*.h5"))) == 2
+        assert all(r["cached"] for r in _run(root, tmp_path / "again", stores["process"], 0))
+    assert {r["timing"] for r in rows["process"]} <= {"alone", "contended"}
+    # the process wrote both captures' files, and without a store their arrays into arrays.h5 (its one writer)
+    assert handed == [("write", not with_store)] * 2
 
 
 def test_a_run_that_defers_its_files_is_complete_once_they_are_finished(root, tmp_path):

@@ -26,3 +26,14 @@ def test_frame_difference_is_relative_to_the_peak(tmp_path):
     difference = frame_difference(tmp_path / "nodes", tmp_path / "direct", SynthConfig())
     assert abs(difference["max_diff_over_peak"] - 5e-4) < 1e-6
     assert np.isnan(difference["rms_diff_over_noise_db"])          # the ideal preset's noise is relative (snr)
+
+
+def test_catalogue_timing_builds_with_the_builders_asked_for_and_restores_the_defaults(tmp_path):
+    from bench.perf.synth import catalogue
+    from bench.synth import workers
+
+    defaults = workers.capture_workers, workers.capture_processes
+    row = catalogue(["01_plate"], 30, SynthConfig(frequency_points=16), 2, tmp_path, builders="threads")
+    assert row["builders"] == "threads" and row["workers"] == 2 and row["captures"] == 1 and row["wall_s"] > 0
+    assert (workers.capture_workers, workers.capture_processes) == defaults
+    assert len(list(tmp_path.glob("workers2-*/01_plate/30/radar_72.0_82.0_16/calibrated_data/*.npy"))) == 2

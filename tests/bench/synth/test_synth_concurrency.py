@@ -65,11 +65,11 @@ def test_concurrent_processes_on_an_empty_root_generate_each_capture_once(tmp_pa
 def test_captures_built_at_once_are_the_files_built_one_at_a_time(tmp_path, monkeypatch):
     """generate_catalogue builds several captures at once (threads): each capture's files are byte for byte those
     of a run that builds one at a time, and the manifest records every capture."""
-    from bench.synth import generate
+    from bench.synth import workers
 
-    monkeypatch.setattr(generate, "capture_workers", lambda: 2)
+    monkeypatch.setattr(workers, "capture_workers", lambda: 2)
     concurrent = generate_catalogue(tmp_path / "at_once", [30], OBJECTS, FAST)
-    monkeypatch.setattr(generate, "capture_workers", lambda: 1)
+    monkeypatch.setattr(workers, "capture_workers", lambda: 1)
     generate_catalogue(tmp_path / "one_by_one", [30], OBJECTS, FAST)
     assert [r.status for r in concurrent] == ["generated"] * 2
     files = _capture_files(tmp_path / "at_once")

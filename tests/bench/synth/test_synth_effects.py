@@ -232,7 +232,7 @@ def test_mount_is_seen_but_is_not_ground_truth():
 
 
 def test_ground_truth_registration_residual_has_the_set_size():
-    from bench.synth.generate import _registration_residual
+    from bench.synth.parts import _registration_residual
 
     config = dataclasses.replace(SynthConfig(), gt_registration_mm=1.0, gt_registration_deg=0.2)
     residual = _registration_residual(config, np.random.default_rng(0))

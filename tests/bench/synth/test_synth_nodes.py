@@ -169,3 +169,44 @@ def test_a_block_summed_into_a_used_buffer_is_the_block_summed_fresh():
     used = (rng.normal(size=fresh.shape) + 1j * rng.normal(size=fresh.shape)).astype(np.complex64)
     found = leg_sum.block_sum(path_m, weight, FREQS_HZ, 6, into=used)
     assert found is used and np.array_equal(found.view(np.uint64), fresh.view(np.uint64))
+
+
+@pytest.mark.parametrize("half_width_m", [0.004, 0.05, 0.7])     # nodes and fit; a wide span: no fit (direct)
+def test_a_fit_read_back_from_the_disk_cache_is_the_fit_computed(half_width_m, tmp_path, monkeypatch):
+    """Kept between runs (bench.synth.radar.fit_cache): what a later run reads is the computed array byte for byte
+    (values, dtype, memory order), so the frames are the same whether the fit was computed or read."""
+    from bench.synth.radar import fit_cache
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    freqs = np.linspace(72e9, 82e9, 128)
+    frequency_nodes._fit.cache_clear()
+    computed = frequency_nodes.interpolator(freqs, half_width_m)
+    assert len(list((tmp_path / fit_cache.FOLDER).glob("*.npz"))) == 1
+    frequency_nodes._fit.cache_clear()                     # a new process: from disk
+    read = frequency_nodes.interpolator(freqs, half_width_m)
+    frequency_nodes._fit.cache_clear()
+    assert (read[1] is None) == (computed[1] is None) == (half_width_m > 0.5)
+    for a, b in zip(read, computed, strict=True):
+        if b is not None:
+            assert a.dtype == b.dtype and a.flags.f_contiguous == b.flags.f_contiguous
+            assert a.tobytes(order="A") == b.tobytes(order="A")
+    assert read[1] is not None or np.array_equal(read[0], freqs)
+
+
+def test_a_damaged_or_unwritable_fit_cache_computes_the_fit(tmp_path, monkeypatch):
+    from bench.synth.radar import fit_cache
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    freqs = np.linspace(72e9, 82e9, 64)
+    frequency_nodes._fit.cache_clear()
+    expected = frequency_nodes.interpolator(freqs, 0.02)
+    (kept,) = (tmp_path / fit_cache.FOLDER).glob("*.npz")
+    kept.write_bytes(b"not a fit")
+    frequency_nodes._fit.cache_clear()
+    found = frequency_nodes.interpolator(freqs, 0.02)
+    assert np.array_equal(found[1], expected[1]) and np.load(kept)["fit"].tobytes() == expected[1].tobytes()
+    (tmp_path / "file").write_text("")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "file"))     # the cache folder cannot be made
+    frequency_nodes._fit.cache_clear()
+    assert np.array_equal(frequency_nodes.interpolator(freqs, 0.02)[1], expected[1])
+    frequency_nodes._fit.cache_clear()

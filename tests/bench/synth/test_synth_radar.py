@@ -10,8 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from bench.maroon.antennas import load_antenna_array
-from bench.synth import SynthConfig, ensure_capture, generate_catalogue, simulate_frame
-from bench.synth import generate as generate_module
+from bench.synth import SynthConfig, ensure_capture, generate_catalogue, simulate_frame, writer
 from bench.synth.meshes import extrude_strip, indexed, triangle_normals
 from bench.synth.radar.model import noise_frame
 from bench.synth.sampling import visible_samples
@@ -205,7 +204,7 @@ def test_interrupted_write_leaves_no_capture(tmp_path, monkeypatch):
     def fail(*args, **kwargs):
         raise RuntimeError("interrupted")
 
-    monkeypatch.setattr(generate_module.writer, "write_metadata", fail)
+    monkeypatch.setattr(writer, "write_metadata", fail)
     with pytest.raises(RuntimeError):
         ensure_capture(tmp_path, "08_two_objects", 30, FAST)
     assert os.listdir(tmp_path / "08_two_objects") == []
