@@ -146,8 +146,7 @@ def _check_signal(capture: Capture, signal: np.ndarray) -> None:
 def _device_checks(backend: Backend, signal: np.ndarray) -> bool:
     """Whether the backend checks this frame's samples for NaN/Inf itself when it uploads them (`checks_samples`:
     Warp on CUDA, BP_max's 9 MB frame, whose host sum cost ~1 ms a call), raising NonFiniteSignal."""
-    checks = getattr(backend, "checks_samples", None)
-    return checks is not None and checks(signal)
+    return backend.checks_samples(signal)
 
 
 def _any_valid(depth_m: np.ndarray) -> bool:

@@ -63,6 +63,15 @@ class Backend:
     #: with `device_fsk`: the `fsk_keep` skip also runs on the device (`keep` of fsk_two_pass / fsk_three)
     keeps_on_device = False
 
+    def checks_samples(self, signal: np.ndarray) -> bool:
+        """Whether this backend checks `signal` for NaN/Inf samples itself where it uploads them (raising
+        `NonFiniteSignal`), so that the caller need not; then `samples_checked` says after the run whether it did."""
+        return False
+
+    def samples_checked(self, signal: np.ndarray) -> bool:
+        """Whether this very array's samples were checked (and found finite) by this backend."""
+        return False
+
     def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m) -> np.ndarray:
         """complex64 (F, N) phasors at points_m (N, 3), radar space, metres."""
         raise NotImplementedError

@@ -39,7 +39,7 @@ class Roi:
     @property
     def n_pixels(self) -> int:
         """Pixels inside the ROI (those a method evaluates at most)."""
-        return int(self.pixels.sum())
+        return int(np.count_nonzero(self.pixels))
 
     def z_indices(self, z_m: np.ndarray) -> np.ndarray:
         """Indices of the depth samples `z_m` inside [z_min_m, z_max_m] (1e-9 m tolerance: grid rounding)."""
