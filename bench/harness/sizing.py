@@ -76,6 +76,20 @@ def busy_cpu_s() -> float:
     return (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")
 
 
+def processes_cpu_s(pids) -> float:
+    """CPU seconds (user + system) the processes `pids` have used so far (/proc/<pid>/stat); a process that is gone
+    or unreadable counts 0 (off Linux every one does)."""
+    total_ticks = 0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as stat:
+                fields = stat.read().rpartition(")")[2].split()   # after the command name, which may hold spaces
+            total_ticks += int(fields[11]) + int(fields[12])      # utime, stime: fields 14 and 15 of the line
+        except (OSError, ValueError, IndexError):
+            continue
+    return total_ticks / os.sysconf("SC_CLK_TCK") if total_ticks else 0.0
+
+
 def contended(load_1m: float, others_cores: float = float("nan")) -> bool:
     """Whether a runtime had to share the cores: other processes used more than OTHERS_CORES_MAX cores on average
     during the call (`others_cores`, where measured); else, by the 1-minute load average, more runnable tasks

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import os
 import pickle
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from bench.harness import CONFIG_DIR, app, captures, stages
+from bench.harness import CONFIG_DIR, app, captures, sizing, stages
 from bench.harness.results import BackgroundWriter
 from bench.maroon import reader
 
@@ -94,6 +97,35 @@ def test_a_row_timed_on_a_busy_machine_is_marked_contended(synth_root, tmp_path,
     monkeypatch.setattr(app, "machine_load", lambda: 0.0)
     assert not app._reusable("contended", "alone") and not app._reusable("parallel", "alone")
     assert app._reusable("alone", "alone") and app._reusable("parallel", "parallel")
+
+
+def test_the_jobs_own_output_process_does_not_make_its_rows_contended(synth_root, tmp_path, monkeypatch):
+    """The rest of the machine's CPU over a timed call, less the job's own pool processes (its output writer, as
+    its writer thread was), decides `contended`: here all of it was the job's own helper."""
+    monkeypatch.setattr(app, "machine_load", lambda: 0.0)
+    machine = iter(range(0, 10**9, 1000))                # 1000 CPU seconds per look, all of them the helper's
+    helper = iter(range(0, 10**9, 1000))
+    monkeypatch.setattr(app, "busy_cpu_s", lambda: float(next(machine)))
+    monkeypatch.setattr(app, "processes_cpu_s", lambda pids: float(next(helper)) if pids == (4242,) else 0.0)
+    monkeypatch.setattr(app.workers, "helper_pids", lambda: (4242,))
+    (row,) = app.run(_cfg(synth_root, "null", "cell=2fsk_d05", "timing.repeat=1"), tmp_path / "own")
+    assert row["timing"] == "alone" and row["others_cores"] < 0.5
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
+def test_a_processes_cpu_time_is_read_from_proc():
+    busy = subprocess.Popen([sys.executable, "-c", "import sys, time\nt = time.process_time()\n"
+                             "while time.process_time() - t < 0.3: pass\nsys.stdin.read()"], stdin=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 30
+        while sizing.processes_cpu_s([busy.pid]) < 0.3 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        used_s = sizing.processes_cpu_s([busy.pid])
+        assert 0.3 <= used_s < 5.0
+        assert sizing.processes_cpu_s([busy.pid, 2**22 + 7]) == used_s       # a pid that is gone counts 0
+    finally:
+        busy.communicate(b"")
+    assert sizing.processes_cpu_s([]) == 0.0
 
 
 def test_stage_seconds_go_to_the_innermost_open_stage(monkeypatch):
