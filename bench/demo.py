@@ -63,12 +63,13 @@ def demo_captures(distances_cm: list[int] | None) -> tuple[list[str], list[int]]
     return objects, list(settings.distances) if distances_cm is None else list(distances_cm)
 
 
-# Seconds per capture on two quiet cores (docs/measurements/performance.md, 2026-11-26: generator v9, BP's host
-# search with its shortcuts), for the estimate the demo prints before it starts; re-measure when they move.
+# Seconds per capture on two quiet cores (docs/measurements/performance.md, 2026-11-26 07:55: generator v9, BP's
+# host search with its shortcuts, pictures drawn into pixels), for the estimate the demo prints before it starts;
+# re-measure when they move.
 GENERATE_S_PER_CAPTURE = 2.6
-SWEEP_S_PER_CAPTURE = {"table2": 1.9, "table3": 18.4}
-BP_MAX_S_PER_CAPTURE = 6.7           # table3's longest cell
-REPORT_S_PER_CAPTURE = 0.8           # the report page, table3's pictures drawn anew (docs/measurements/sweep.md)
+SWEEP_S_PER_CAPTURE = {"table2": 1.8, "table3": 16.5}
+BP_MAX_S_PER_CAPTURE = 6.0           # table3's longest cell
+REPORT_S_PER_CAPTURE = 0.6           # the report page, table3's pictures drawn anew (docs/measurements/sweep.md)
 
 
 def plan(root: Path, store: Path, distances_cm: list[int] | None) -> str:
