@@ -9,14 +9,19 @@ time: the frames are the same (tests/bench/synth/test_synth_workers.py).
 from __future__ import annotations
 
 import contextlib
+import pickle
 import secrets
 import shutil
+import socket
 import tempfile
 import threading
+from multiprocessing import AuthenticationError
 from multiprocessing.connection import Client, Connection, Listener
 from pathlib import Path
 
 from bench.synth.radar import warp_sum
+
+ACCEPT_JOIN_S = 5.0        # how long closing waits for the accepting thread (a daemon: it cannot keep the process)
 
 
 def _start_device() -> None:
@@ -48,8 +53,10 @@ class DeviceServer:
         while True:
             try:
                 connection = self._listener.accept()
-            except OSError:            # closed
-                return
+            except (OSError, EOFError, AuthenticationError):   # closed, or a client that died in the handshake
+                if self._closing:
+                    return
+                continue
             if self._closing:
                 connection.close()
                 return
@@ -67,14 +74,20 @@ class DeviceServer:
                     reply = (True, warp_sum.frame_of_blocks(*arguments))
                 except Exception as err:          # raised again in the worker that asked
                     reply = (False, err)
-                connection.send(reply)
+                try:
+                    connection.send(reply)
+                except (pickle.PicklingError, TypeError, AttributeError):   # an error that does not pickle
+                    connection.send((False, RuntimeError(repr(reply[1]))))
+                except OSError:                   # the worker has gone
+                    return
 
     def close(self) -> None:
         """Stop accepting (the workers' connections end with them) and remove the socket."""
         self._closing = True
-        with Client(self.address[0], "AF_UNIX", authkey=self.address[1]):    # wakes the accepting thread
-            pass
-        self._threads[1].join()
+        with contextlib.suppress(OSError), socket.socket(socket.AF_UNIX) as wake:   # wakes the accepting thread
+            wake.settimeout(ACCEPT_JOIN_S)          # (no handshake needed; a full backlog would block a connect)
+            wake.connect(self.address[0])
+        self._threads[1].join(timeout=ACCEPT_JOIN_S)
         self._listener.close()
         shutil.rmtree(self._folder, ignore_errors=True)
 

@@ -6,7 +6,11 @@ from __future__ import annotations
 import dataclasses
 import json
 import multiprocessing
+import socket
+import threading
+import time
 import types
+from multiprocessing.connection import Client
 
 import numpy as np
 import pytest
@@ -128,6 +132,30 @@ def test_a_worker_gets_the_frame_the_server_computes_and_its_errors(monkeypatch)
     np.testing.assert_array_equal(seen[0][0].tx.lobe_rad, rows.tx.lobe_rad)
     np.testing.assert_array_equal(seen[0][0].rx.point_m, points)
     assert isinstance(error, ValueError) and "no such device" in str(error)
+
+
+def test_a_client_that_dies_in_the_handshake_leaves_the_server_serving(monkeypatch):
+    """A worker killed while connecting (a bare connect, then gone) must not end the accepting thread: the next
+    worker is served, and closing returns at once."""
+    monkeypatch.setattr(warp_sum, "start", lambda: None)
+    monkeypatch.setattr(warp_sum, "frame_of_blocks", lambda *a: np.ones((1, 1, 1), np.complex64))
+    with remote.DeviceServer() as server:
+        for _ in range(2):
+            with socket.socket(socket.AF_UNIX) as dying:
+                dying.connect(server.address[0])
+        replies = []
+
+        def ask():
+            with Client(server.address[0], "AF_UNIX", authkey=server.address[1]) as client:
+                client.send(())
+                replies.append(client.recv())
+
+        asking = threading.Thread(target=ask, daemon=True)      # a dead accepting thread would leave it waiting
+        asking.start()
+        asking.join(timeout=10)
+        assert replies and replies[0][0] is True
+        started = time.monotonic()
+    assert time.monotonic() - started < remote.ACCEPT_JOIN_S and not server._threads[1].is_alive()
 
 
 @pytest.mark.parametrize("device", ["warp-cpu", CUDA])
