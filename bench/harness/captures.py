@@ -81,16 +81,17 @@ def read(capture_dir: Path, frame: int, parts: tuple[str, ...], empty_filtered: 
 
 def kept_mesh(store: Store, path: Path) -> Mesh:
     """The mesh file `path` parsed (bench.maroon.reader.read_mesh: Open3D and its checks) the first time its
-    content is seen, then read back from `<store>/meshes/<sha256 of the file>.h5` (vertices, triangles as
-    parsed): a sweep whose prior is the photogrammetry mesh then neither imports Open3D nor parses the OBJ. A kept
-    file that fails a check (`_mesh_arrays`) is not used: a warning names it, and the OBJ is parsed and kept anew."""
-    digest = store.file_digest(path)
-    kept = store.root / "meshes" / f"{digest}.h5"
-    arrays = _read_kept(store, kept, digest, _mesh_arrays, "parsing the mesh file again")
+    content is seen, then read back from `<store>/meshes/<key>.h5` (key: the file's sha256 and the code version;
+    vertices, triangles as parsed): a sweep whose prior is the photogrammetry mesh then neither imports Open3D nor
+    parses the OBJ. A kept file that fails a check (`_mesh_arrays`) is not used: a warning names it, and the OBJ is
+    parsed and kept anew."""
+    key = store.key({"mesh": store.file_digest(path), "code": code_version()})   # a new reader parses it anew
+    kept = store.root / "meshes" / f"{key}.h5"
+    arrays = _read_kept(store, kept, key, _mesh_arrays, "parsing the mesh file again")
     if arrays is not None:
         return Mesh(vertices=arrays["vertices"], triangles=arrays["triangles"], path=path)
     mesh = reader.read_mesh(path)
-    _keep(kept, {"vertices": mesh.vertices, "triangles": mesh.triangles}, digest)
+    _keep(kept, {"vertices": mesh.vertices, "triangles": mesh.triangles}, key)
     return mesh
 
 
@@ -213,12 +214,16 @@ def ground_truth(capture_dir: Path, capture: Capture, with_mesh: Callable[[], Ca
 
 def _keep(path: Path, arrays: dict[str, np.ndarray], key: str) -> None:
     """Write the arrays, and the `key` they are kept under, whole or not at all (bench.harness.atomic, as the store
-    writes its cells)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    writes its cells). A kept file only saves work: where it cannot be written (a full disk or quota, a read-only
+    folder) a warning says so and the run goes on."""
     image = io.BytesIO()
     with h5py.File(image, "w") as h5:
         for name, values in arrays.items():
             h5.create_dataset(name, data=values, compression="gzip", compression_opts=1, shuffle=True)
         h5.attrs["made_by"] = json.dumps({"code": code_version()})
         h5.attrs["key"] = key
-    atomic.write_bytes(path, image.getvalue())
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic.write_bytes(path, image.getvalue())
+    except OSError as err:
+        log.warning("could not keep %s (%s); going on without it", path, err.strerror or err)

@@ -32,6 +32,7 @@ the cell's pixel grid, metres / linear), `<store>/digests/<hash of the stamp>` (
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
@@ -126,8 +127,9 @@ class Store:
         unchanged = _stamp(path, before) == _stamp(path, hashed) == _stamp(path, after)
         settled = time.time_ns() - max(after.st_mtime_ns, after.st_ctime_ns) > RACY_S * 1e9
         if unchanged and settled:
-            cached.parent.mkdir(parents=True, exist_ok=True)
-            atomic.write_bytes(cached, digest.encode())
+            with contextlib.suppress(OSError):      # a digest not kept on disk is hashed again next time
+                cached.parent.mkdir(parents=True, exist_ok=True)
+                atomic.write_bytes(cached, digest.encode())
             self._digests[stamp] = digest
         return digest
 

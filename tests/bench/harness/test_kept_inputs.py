@@ -167,3 +167,35 @@ def test_a_kept_ground_truth_is_the_one_derived_from_the_mesh_array_for_array(sy
         np.testing.assert_array_equal(kept[name], values, err_msg=name)
     assert (gts[1].mask_bb_m, gts[1].reference.mask_bb_m, gts[1].mask_erosion) == \
         (gts[0].mask_bb_m, gts[0].reference.mask_bb_m, gts[0].mask_erosion)
+
+
+def test_another_code_version_parses_the_mesh_again(synth_root, tmp_path, counted, monkeypatch):
+    """A kept mesh is the reader's output: a new code version (a changed reader) parses the OBJ again."""
+    casts, parses, fresh = counted
+    fresh()
+    app.run(_cfg(synth_root, tmp_path / "cache"), tmp_path / "first")
+    monkeypatch.setattr(captures, "code_version", lambda: "another-version")
+    fresh()
+    app.run(_cfg(synth_root, tmp_path / "cache"), tmp_path / "second")
+    assert len(parses) == 2 and len(list((tmp_path / "cache" / "meshes").glob("*.h5"))) == 2
+
+
+def test_kept_files_that_cannot_be_written_leave_the_run_going(synth_root, tmp_path, counted, monkeypatch, caplog):
+    """A full disk or quota while keeping: one warning per file, the row scored as without a cache."""
+    casts, parses, fresh = counted
+    fresh()
+    (plain,) = app.run(_cfg(synth_root, "null"), tmp_path / "plain")
+
+    write = captures.atomic.write_bytes
+
+    def full(path, data):                                 # the cache's file system is full, the outputs' is not
+        if tmp_path / "cache" in path.parents:
+            raise OSError(122, "Disk quota exceeded", str(path))
+        return write(path, data)
+
+    monkeypatch.setattr(captures.atomic, "write_bytes", full)
+    fresh()
+    with caplog.at_level(logging.WARNING, logger="bench"):
+        (row,) = app.run(_cfg(synth_root, tmp_path / "cache"), tmp_path / "full")
+    _same_scores(plain, row)
+    assert sum("could not keep" in r.getMessage() and "quota" in r.getMessage() for r in caplog.records) == 2
