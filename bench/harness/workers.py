@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import logging
 import multiprocessing
 import os
 import pickle
@@ -35,6 +36,7 @@ from metrics.chamfer import usable_cores
 from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
 
+log = logging.getLogger("bench")
 MAX_AUTO_WORKERS = 6
 OUTPUT_PROCESS_MIN_CORES = 4
 HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: 'auto' leaves them every core
@@ -169,7 +171,11 @@ def pool(workers: int) -> ProcessPoolExecutor | None:
     if workers not in _POOLS:
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
-        _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context, initializer=_one_query_thread)
+        try:
+            _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context, initializer=_one_query_thread)
+        except (OSError, ImportError, NotImplementedError) as err:   # no semaphores (no writable /dev/shm)
+            log.warning("no worker processes on this machine (%s): the job's own threads do their work", err)
+            return None
         # its processes started by another thread: the fork server's imports (~1 s) and the workers' starts happen
         # while this one goes on (Warp's start, reading, the first reconstruction), not when it hands over work
         threading.Thread(target=_start, args=(_POOLS[workers], workers), name="workers-start", daemon=True).start()

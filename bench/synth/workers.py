@@ -11,6 +11,7 @@ the device (bench.synth.radar.remote): the workers send it their rows and receiv
 from __future__ import annotations
 
 import contextlib
+import functools
 import multiprocessing
 import multiprocessing.forkserver
 import os
@@ -48,7 +49,18 @@ def capture_processes() -> bool:
     safe_main = getattr(main, "__spec__", None) is not None or getattr(main, "__file__", None) is None
     return (safe_main and cores() >= MIN_CORES_FOR_PROCESSES
             and not multiprocessing.current_process().daemon        # a daemonic process may not have children
-            and START_METHOD in multiprocessing.get_all_start_methods())
+            and START_METHOD in multiprocessing.get_all_start_methods() and _semaphores_work())
+
+
+@functools.cache
+def _semaphores_work() -> bool:
+    """Whether this machine gives multiprocessing the semaphores its pools need (no writable /dev/shm in some
+    containers: then threads)."""
+    try:
+        multiprocessing.get_context(START_METHOD).Lock()
+    except (OSError, ImportError, NotImplementedError):
+        return False
+    return True
 
 
 def prestart() -> None:

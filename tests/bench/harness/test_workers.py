@@ -3,6 +3,7 @@ scored in the main thread, their runtimes labelled as taken beside other work; a
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import time
 from pathlib import Path
@@ -89,6 +90,20 @@ def test_pool_sizes(monkeypatch, cores, expected):
     process = workers.output_process()
     assert (process is not None) == (cores >= workers.OUTPUT_PROCESS_MIN_CORES)
     assert workers.output_process(shared=True) is None
+
+
+def test_no_worker_processes_where_the_machine_cannot_make_a_pool(monkeypatch, caplog):
+    """No semaphores (no writable /dev/shm): the output process is not started, a warning says so, and the job's
+    writer thread does its work."""
+    def no_shm(*args, **kwargs):
+        raise OSError(38, "Function not implemented")
+
+    monkeypatch.setattr(workers, "ProcessPoolExecutor", no_shm)
+    monkeypatch.setattr(workers, "_POOLS", {})
+    monkeypatch.setattr(workers, "usable_cores", lambda: 16)
+    with caplog.at_level(logging.WARNING, logger="bench"):
+        assert workers.output_process() is None
+    assert any("no worker processes" in r.getMessage() for r in caplog.records)
 
 
 @pytest.mark.parametrize("with_store", [True, False])

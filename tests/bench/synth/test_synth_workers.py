@@ -85,6 +85,24 @@ def test_processes_only_where_a_worker_may_import_the_main_module_again(monkeypa
     assert workers.capture_processes() is False
 
 
+def test_threads_where_the_machine_has_no_semaphores_for_worker_processes(monkeypatch):
+    """No writable /dev/shm (some containers): a pool's locks cannot be made, so the parts are built in threads."""
+    monkeypatch.setattr(workers, "cores", lambda: 16)
+    monkeypatch.setitem(__import__("sys").modules, "__main__", types.SimpleNamespace(__spec__=None))
+    workers._semaphores_work.cache_clear()
+    assert workers.capture_processes() is True
+
+    def no_shm(self, *args, **kwargs):
+        raise OSError(38, "Function not implemented")
+
+    monkeypatch.setattr(type(multiprocessing.get_context(workers.START_METHOD)), "Lock", no_shm)
+    workers._semaphores_work.cache_clear()
+    try:
+        assert workers.capture_processes() is False
+    finally:
+        workers._semaphores_work.cache_clear()
+
+
 def _worker_frame(address, rows, positions, rx_m, tx_m, freqs_hz, device):
     remote.connect(*address)
     try:
