@@ -195,9 +195,13 @@ def generate_catalogue(root, distances: Iterable[int] = DEFAULT_DISTANCES_CM, ob
     # BLAS single-threaded throughout (in worker processes too): calls from captures built at once into a
     # multi-threaded OpenBLAS contend (its workers busy-wait); the captures' own threads use the cores
     with ownership.exclusive(root, on_wait), single_threaded_blas():
-        plans = {pair: _prepare(root, *pair, config, force, device) for pair in unique}
-        pending = {pair: plan for pair, plan in plans.items() if isinstance(plan, _Pending)}
+        plans: dict = {}
+        pending: dict = {}
         try:
+            for pair in unique:                   # inside the try: a later pair's error removes earlier temp folders
+                plans[pair] = _prepare(root, *pair, config, force, device)
+                if isinstance(plans[pair], _Pending):
+                    pending[pair] = plans[pair]
             with (workers.builders(min(workers.capture_workers(), len(pending) * len(CAPTURE_PARTS)), device)
                   if pending else contextlib.nullcontext()) as submit:
                 # every capture's radar part first (the longest), then the cameras, then the ground truths
