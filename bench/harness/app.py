@@ -35,7 +35,15 @@ from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
 from bench.harness.results import BackgroundWriter, ResultsCsv, write_depth
-from bench.harness.sizing import busy_cpu_s, contended, machine_load, processes_cpu_s, sweep_jobs, timing_mode
+from bench.harness.sizing import (
+    busy_cpu_s,
+    contended,
+    descendants,
+    machine_load,
+    processes_cpu_s,
+    sweep_jobs,
+    timing_mode,
+)
 from bench.harness.store import Store, capture_files, code_version, copy_cell, write_arrays
 from bench.maroon import reader
 from bench.maroon.frames import parse_frame_spec, select_frames
@@ -248,7 +256,7 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
                              scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
                              threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
     load_1m = machine_load()
-    helpers = workers.helper_pids()
+    helpers = descendants()
     busy_s, cpu_s, wall_s = busy_cpu_s(), time.process_time(), time.perf_counter()
     helpers_s = processes_cpu_s(helpers)
     with stages.stage("methods"):
@@ -261,7 +269,8 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
         with stages.stage("methods"):
             runtimes_ms.append(call().timings_ms["total"])
     # what the rest of the machine used over the timed calls, in cores (/proc/stat counts clock ticks of 10 ms:
-    # over windows under 20 ms it says nothing); the job's own pool processes (its output writer) are its own
+    # over windows under 20 ms it says nothing); the job's own child processes (its output writer, the fork server
+    # that starts it) are its own, as its writer thread was
     own_s = time.process_time() - cpu_s + processes_cpu_s(helpers) - helpers_s
     window_s = time.perf_counter() - wall_s
     columns["others_cores"] = (max(0.0, busy_cpu_s() - busy_s - own_s) / window_s if window_s >= 0.02

@@ -76,6 +76,27 @@ def busy_cpu_s() -> float:
     return (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")
 
 
+def descendants() -> list[int]:
+    """The process ids of this process's children, theirs, and so on (/proc/<pid>/task/<tid>/children; empty off
+    Linux): the job's own helpers (a fork server, its pool workers), whose CPU time is the job's own."""
+    found, todo = [], [os.getpid()]
+    while todo:
+        pid = todo.pop()
+        try:
+            tasks = os.listdir(f"/proc/{pid}/task")
+        except OSError:
+            continue
+        for tid in tasks:
+            try:
+                with open(f"/proc/{pid}/task/{tid}/children") as children:
+                    new = [int(child) for child in children.read().split()]
+            except (OSError, ValueError):
+                continue
+            found += new
+            todo += new
+    return found
+
+
 def processes_cpu_s(pids) -> float:
     """CPU seconds (user + system) the processes `pids` have used so far (/proc/<pid>/stat); a process that is gone
     or unreadable counts 0 (off Linux every one does)."""

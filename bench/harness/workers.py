@@ -21,7 +21,6 @@ import dataclasses
 import functools
 import logging
 import multiprocessing
-import os
 import pickle
 import threading
 import time
@@ -189,19 +188,10 @@ def _one_query_thread() -> None:
     chamfer.QUERY_THREADS = 1
 
 
-_HELPER_PIDS: set[int] = set()
-
-
-def helper_pids() -> tuple[int, ...]:
-    """The process ids of this process's pool workers started so far: their CPU time is the job's own, as its
-    writer thread's was, not another job's (bench.harness.app's `others_cores`)."""
-    return tuple(_HELPER_PIDS)
-
-
 def _start(pool: ProcessPoolExecutor, workers: int) -> None:
-    """Start every worker (a pool starts one per task handed over while none is idle) and note its pid."""
-    for started in [pool.submit(os.getpid) for _ in range(workers)]:
-        _HELPER_PIDS.add(started.result())
+    """Start every worker (a pool starts one per task handed over while none is idle)."""
+    for started in [pool.submit(int) for _ in range(workers)]:
+        started.result()
 
 
 def done(value) -> Future:

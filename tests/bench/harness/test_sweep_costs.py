@@ -100,20 +100,20 @@ def test_a_row_timed_on_a_busy_machine_is_marked_contended(synth_root, tmp_path,
 
 
 def test_the_jobs_own_output_process_does_not_make_its_rows_contended(synth_root, tmp_path, monkeypatch):
-    """The rest of the machine's CPU over a timed call, less the job's own pool processes (its output writer, as
-    its writer thread was), decides `contended`: here all of it was the job's own helper."""
+    """The rest of the machine's CPU over a timed call, less the job's own child processes (its output writer, the
+    fork server that starts it, as its writer thread was), decides `contended`: here all of it was a child's."""
     monkeypatch.setattr(app, "machine_load", lambda: 0.0)
     machine = iter(range(0, 10**9, 1000))                # 1000 CPU seconds per look, all of them the helper's
     helper = iter(range(0, 10**9, 1000))
     monkeypatch.setattr(app, "busy_cpu_s", lambda: float(next(machine)))
-    monkeypatch.setattr(app, "processes_cpu_s", lambda pids: float(next(helper)) if pids == (4242,) else 0.0)
-    monkeypatch.setattr(app.workers, "helper_pids", lambda: (4242,))
+    monkeypatch.setattr(app, "processes_cpu_s", lambda pids: float(next(helper)) if pids == [4242] else 0.0)
+    monkeypatch.setattr(app, "descendants", lambda: [4242])
     (row,) = app.run(_cfg(synth_root, "null", "cell=2fsk_d05", "timing.repeat=1"), tmp_path / "own")
     assert row["timing"] == "alone" and row["others_cores"] < 0.5
 
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
-def test_a_processes_cpu_time_is_read_from_proc():
+def test_a_child_processes_cpu_time_is_read_from_proc():
     busy = subprocess.Popen([sys.executable, "-c", "import sys, time\nt = time.process_time()\n"
                              "while time.process_time() - t < 0.3: pass\nsys.stdin.read()"], stdin=subprocess.PIPE)
     try:
@@ -123,9 +123,36 @@ def test_a_processes_cpu_time_is_read_from_proc():
         used_s = sizing.processes_cpu_s([busy.pid])
         assert 0.3 <= used_s < 5.0
         assert sizing.processes_cpu_s([busy.pid, 2**22 + 7]) == used_s       # a pid that is gone counts 0
+        assert busy.pid in sizing.descendants()
     finally:
         busy.communicate(b"")
     assert sizing.processes_cpu_s([]) == 0.0
+
+
+def _parent_pid(pid: str) -> int | None:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return int(stat.read().rpartition(")")[2].split()[1])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="reads /proc")
+def test_descendants_are_children_and_their_children():
+    """A fork server's pool workers are the job's grandchildren: both generations count as its own."""
+    child = subprocess.Popen([sys.executable, "-c", "import subprocess, sys\n"
+                              "subprocess.run([sys.executable, '-c', 'import sys; sys.stdin.read()'])"],
+                             stdin=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 30
+        while not (grandchildren := [int(p) for p in os.listdir("/proc") if p.isdigit()
+                                     and _parent_pid(p) == child.pid]):
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        found = sizing.descendants()
+        assert child.pid in found and set(grandchildren) <= set(found)
+    finally:
+        child.communicate(b"")
 
 
 def test_stage_seconds_go_to_the_innermost_open_stage(monkeypatch):
