@@ -28,9 +28,9 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
+from bench.cachedir import default_cache_dir
 from bench.harness import CONFIG_DIR, captures, stages, validate, workers
 from bench.harness import results as outputs
-from bench.harness.codeversion import default_cache_dir
 from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
@@ -303,7 +303,7 @@ def _store(root: str) -> Store:
 
 
 def kept_inputs_dir(cfg: DictConfig) -> Path | None:
-    """`store.cache` as a folder (auto: the user's cache folder, bench.harness.codeversion.default_cache_dir), or
+    """`store.cache` as a folder (auto: the user's cache folder, bench.cachedir.default_cache_dir), or
     None (null, or auto where no cache folder is known)."""
     setting = OmegaConf.select(cfg, "store.cache", default=None)
     if setting is None:

@@ -20,10 +20,11 @@ import ast
 import functools
 import hashlib
 import json
-import os
 import re
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+
+from bench.cachedir import default_cache_dir
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("bench", "methods", "metrics")
@@ -109,18 +110,6 @@ def sources_key(root: Path = PACKAGE_ROOT) -> str:
     for path in sorted(p for package in PACKAGES for p in (root / package).rglob("*.py")):
         digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return digest.hexdigest()
-
-
-def default_cache_dir() -> Path | None:
-    """The user's cache folder of the package: $XDG_CACHE_HOME (when absolute) or ~/.cache, then mm2fsk-bench; None
-    where neither is known (no HOME and no passwd entry, as in some containers): then nothing is cached."""
-    base = os.environ.get("XDG_CACHE_HOME", "")
-    if not os.path.isabs(base):
-        try:
-            base = Path.home() / ".cache"
-        except RuntimeError:
-            return None
-    return Path(base) / "mm2fsk-bench"
 
 
 def default_cache_file() -> Path | None:

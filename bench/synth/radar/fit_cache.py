@@ -17,18 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-FOLDER = Path("mm2fsk-bench") / "synth-fits"
+from bench.cachedir import default_cache_dir
 
 
 def folder() -> Path | None:
-    """$XDG_CACHE_HOME (when absolute) or ~/.cache, then FOLDER; None where neither is known (no HOME)."""
-    base = os.environ.get("XDG_CACHE_HOME", "")
-    if not os.path.isabs(base):
-        try:
-            base = Path.home() / ".cache"
-        except RuntimeError:
-            return None
-    return Path(base) / FOLDER
+    """The generator's kept fits: synth-fits in the user's cache folder; None where there is none (no HOME)."""
+    base = default_cache_dir()
+    return None if base is None else base / "synth-fits"
 
 
 @functools.cache

@@ -175,13 +175,12 @@ def test_a_block_summed_into_a_used_buffer_is_the_block_summed_fresh():
 def test_a_fit_read_back_from_the_disk_cache_is_the_fit_computed(half_width_m, tmp_path, monkeypatch):
     """Kept between runs (bench.synth.radar.fit_cache): what a later run reads is the computed array byte for byte
     (values, dtype, memory order), so the frames are the same whether the fit was computed or read."""
-    from bench.synth.radar import fit_cache
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     freqs = np.linspace(72e9, 82e9, 128)
     frequency_nodes._fit.cache_clear()
     computed = frequency_nodes.interpolator(freqs, half_width_m)
-    assert len(list((tmp_path / fit_cache.FOLDER).glob("*.npz"))) == 1
+    assert len(list((tmp_path / "mm2fsk-bench" / "synth-fits").glob("*.npz"))) == 1
     frequency_nodes._fit.cache_clear()                     # a new process: from disk
     read = frequency_nodes.interpolator(freqs, half_width_m)
     frequency_nodes._fit.cache_clear()
@@ -194,13 +193,12 @@ def test_a_fit_read_back_from_the_disk_cache_is_the_fit_computed(half_width_m, t
 
 
 def test_a_damaged_or_unwritable_fit_cache_computes_the_fit(tmp_path, monkeypatch):
-    from bench.synth.radar import fit_cache
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     freqs = np.linspace(72e9, 82e9, 64)
     frequency_nodes._fit.cache_clear()
     expected = frequency_nodes.interpolator(freqs, 0.02)
-    (kept,) = (tmp_path / fit_cache.FOLDER).glob("*.npz")
+    (kept,) = (tmp_path / "mm2fsk-bench" / "synth-fits").glob("*.npz")
     kept.write_bytes(b"not a fit")
     frequency_nodes._fit.cache_clear()
     found = frequency_nodes.interpolator(freqs, 0.02)
