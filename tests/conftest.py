@@ -26,8 +26,8 @@ _CACHE_HOME = Path(tempfile.mkdtemp(prefix="bench-cache-"))
 
 
 def pytest_configure(config):
-    # the code version's cache (bench.harness.codeversion) in a folder of this session, never the user's ~/.cache;
-    # subprocesses inherit it
+    # every cache of the package (bench.cachedir: the code version, kept ground truths, the generator's fits) in a
+    # folder of this session, never the user's ~/.cache; subprocesses inherit it
     os.environ["XDG_CACHE_HOME"] = str(_CACHE_HOME)
     if os.environ.get("BENCH_SLURM_TRY") != "1":
         os.environ["PATH"] = path_without_slurm(os.environ.get("PATH", ""), _SHADOW_PATH)
