@@ -75,6 +75,7 @@ Evaluate = Callable[[np.ndarray], np.ndarray]      # points (N, 3) m -> frequenc
 # (x_m, y_m, z_m, step) -> (coarse maximum (N,), its first depth index (N,), samples evaluated), or None: the host
 CoarsePeaks = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], "tuple[np.ndarray, np.ndarray, int] | None"]
 BATCH_POINTS = 1 << 16                             # points per evaluate call (128 frequencies: 64 MB of phasors)
+SMALL_SUBSET = 8                                   # fewer than 1/8 of the pixels: read their rows, not the whole array
 
 
 @dataclass(frozen=True)
@@ -275,14 +276,19 @@ def _candidates(mag: np.ndarray, rows: np.ndarray, ratio: np.ndarray, local_max:
     the pixels `rows` (ascending) within `ratio` (len(rows),) of their pixel's maximum and, with `local_max`, no
     smaller than their pixel's nearest evaluated samples on either side (module doc); and the depth indices of
     those nearest evaluated samples (left, right; -1: none). Works on the list of evaluated samples (~25 of a
-    pixel's ~200 depths), found in one pass over `mag` (no copy of the rows)."""
+    pixel's ~200 depths), found in one pass over `mag` (no copy of the rows), or over a copy of the rows where
+    they are few (the re-checked pixels)."""
     n_z = mag.shape[1]
-    flat = np.flatnonzero(mag >= 0)                                            # pixel-major, depth ascending
-    asked = np.zeros(len(mag), dtype=bool)
-    asked[rows] = True
-    flat = flat[asked[flat // n_z]]
-    pixel = flat // n_z
-    vals = mag.ravel()[flat]
+    if SMALL_SUBSET * len(rows) < len(mag):
+        block = mag[rows]
+        flat = np.flatnonzero(block >= 0)                                      # pixel-major, depth ascending
+        pixel, vals = rows[flat // n_z], block.ravel()[flat]
+    else:
+        flat = np.flatnonzero(mag >= 0)
+        asked = np.zeros(len(mag), dtype=bool)
+        asked[rows] = True
+        flat = flat[asked[flat // n_z]]
+        pixel, vals = flat // n_z, mag.ravel()[flat]
     starts = np.flatnonzero(np.concatenate(([True], pixel[1:] != pixel[:-1]))) if len(flat) else flat
     ratio_of = np.zeros(len(mag))
     ratio_of[rows] = ratio
@@ -522,7 +528,8 @@ def _climb(samples: _Samples, active: np.ndarray) -> None:
     """Evaluate unevaluated neighbours of each active pixel's argmax until none is left."""
     n_z = samples.mag.shape[1]
     pixels = np.flatnonzero(active)
-    k_all = np.argmax(samples.mag, axis=1)                 # the first round's: no copy of most of the rows
+    # the first round's: no copy of most of the rows (a few rows, the re-checked pixels: their copy)
+    k_all = None if SMALL_SUBSET * len(pixels) < len(samples.mag) else np.argmax(samples.mag, axis=1)
     for _ in range(n_z):
         if len(pixels) == 0:
             return

@@ -227,12 +227,13 @@ def test_coarse_to_fine_misses_a_peak_when_the_condition_fails():
     assert found.depth_m[0] == full.depth_m[0]
 
 
-def test_candidates_match_a_plain_loop(record_property):
+@pytest.mark.parametrize("n_rows", [20, 3])          # most pixels, or a few (read through a copy of their rows)
+def test_candidates_match_a_plain_loop(n_rows, record_property):
     rng = fresh_rng(record_property)
     mag = np.where(rng.random((30, 40)) < 0.3, rng.random((30, 40)), -1.0).astype(np.float32)   # (pixels, depths)
     mag[rng.random(30) < 0.2] = -1.0                                   # pixels without an evaluated sample
-    rows = np.sort(rng.choice(30, size=20, replace=False))             # the pixels asked about
-    ratio = rng.uniform(0.2, 1.0, 20)
+    rows = np.sort(rng.choice(30, size=n_rows, replace=False))         # the pixels asked about
+    ratio = rng.uniform(0.2, 1.0, n_rows)
     ratio[0] = 1.0                                                     # a window of 0 dB
     for local_max in (False, True):
         want = []
