@@ -41,6 +41,7 @@ from bench.harness.sizing import (
     descendants,
     machine_load,
     processes_cpu_s,
+    runs_jobs_here,
     sweep_jobs,
     timing_mode,
 )
@@ -578,10 +579,9 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
 
 
 def _next_job_here(hydra_cfg: DictConfig) -> bool:
-    """Whether the multirun's next job runs in this process after this one (the basic launcher): this job's last
-    output files may then be written while it starts (the merge callback waits for them)."""
-    return (hydra_cfg.mode == RunMode.MULTIRUN
-            and str(hydra_cfg.launcher.get("_target_", "")).endswith("BasicLauncher"))
+    """Whether the multirun's next job runs in this process after this one (the in-process and basic launchers):
+    this job's last output files may then be written while it starts (the merge callback waits for them)."""
+    return hydra_cfg.mode == RunMode.MULTIRUN and runs_jobs_here(hydra_cfg.launcher)
 
 
 def _isolate_warp_cache() -> None:
