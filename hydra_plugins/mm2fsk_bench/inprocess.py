@@ -38,6 +38,8 @@ from hydra.types import HydraContext, TaskFunction
 from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 from omegaconf._utils import get_omega_conf_dumper
 
+from bench.harness import stages
+
 log = logging.getLogger(__name__)
 
 
@@ -66,6 +68,7 @@ def run_job_here(hydra_context: HydraContext, task_function: TaskFunction, confi
                  writer: ThreadPoolExecutor, written: list[Future]) -> JobReturn:
     """hydra.core.utils.run_job for a sweep's job (`hydra.sweep.dir`/`subdir`), with the set-up of the module doc;
     the .hydra files are submitted to `writer` (their futures appended to `written`)."""
+    stages.begin("launch")
     callbacks = hydra_context.callbacks
     old_cwd = os.getcwd()
     hydra_config = HydraConfig.instance()
@@ -101,12 +104,14 @@ def run_job_here(hydra_context: HydraContext, task_function: TaskFunction, confi
             written.append(writer.submit(_write_files, folder, containers))
         with env_override(config.hydra.job.env_set):
             callbacks.on_job_start(config=config, task_function=task_function)
+            stages.end()
             try:
                 ret.return_value = task_function(task_cfg)
                 ret.status = JobStatus.COMPLETED
             except Exception as e:  # noqa: BLE001 -- as Hydra: the job's error is its return value
                 ret.return_value = e
                 ret.status = JobStatus.FAILED
+            stages.begin("launch")
         ret.task_name = JobRuntime.instance().get("name")
         _flush_loggers()
         callbacks.on_job_end(config=config, job_return=ret)
@@ -115,6 +120,7 @@ def run_job_here(hydra_context: HydraContext, task_function: TaskFunction, confi
         hydra_config.cfg = previous
         if chdir:
             os.chdir(old_cwd)
+        stages.end()
 
 
 class InProcessLauncher(Launcher):
