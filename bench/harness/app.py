@@ -585,8 +585,13 @@ def _next_job_here(hydra_cfg: DictConfig) -> bool:
 
 
 def _isolate_warp_cache() -> None:
-    """Parallel jobs must not compile Warp kernels into one cache directory (DESIGN.md 8): one per process."""
-    if HydraConfig.get().mode == RunMode.MULTIRUN and "WARP_CACHE_PATH" not in os.environ:
+    """Parallel jobs must not compile Warp kernels into one cache directory (DESIGN.md 8): one per process for a
+    multirun whose jobs run in other processes (joblib, submitit). Jobs run in this process one after another (the
+    in-process and basic launchers) use Warp's own cache, as a single run does: kernels compiled by one sweep serve
+    the next (a folder per process id made every such sweep compile them anew: ~40 s for Table III on the H100)."""
+    hydra_cfg = HydraConfig.get()
+    if (hydra_cfg.mode == RunMode.MULTIRUN and not runs_jobs_here(hydra_cfg.launcher)
+            and "WARP_CACHE_PATH" not in os.environ):
         os.environ["WARP_CACHE_PATH"] = str(Path(tempfile.gettempdir()) / f"bench-warp-{os.getuid()}-{os.getpid()}")
 
 

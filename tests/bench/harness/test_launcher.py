@@ -218,3 +218,20 @@ def test_a_sweeps_compositions_share_its_config_files_and_equal_fresh_ones(exper
     assert shared == fresh and len(batch) >= 6
     assert sorted(shared_reads) == sorted(set(shared_reads))               # once per file, not once per job
     assert len(shared_reads) < len(reads) / 3
+
+
+@pytest.mark.parametrize("mode, launcher, isolated", [
+    (RunMode.MULTIRUN, INPROCESS, False),
+    (RunMode.MULTIRUN, "hydra._internal.core_plugins.basic_launcher.BasicLauncher", False),
+    (RunMode.MULTIRUN, "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher", True),
+    (RunMode.RUN, INPROCESS, False)])
+def test_only_jobs_in_other_processes_get_a_warp_kernel_cache_of_their_own(monkeypatch, mode, launcher, isolated):
+    """Jobs that may compile side by side get a cache folder per process (DESIGN.md 8); jobs run one after another
+    in the sweep's process keep Warp's own cache, which the next sweep finds warm."""
+    monkeypatch.delenv("WARP_CACHE_PATH", raising=False)
+    hydra_cfg = OmegaConf.create({"mode": mode, "launcher": {"_target_": launcher}})
+    monkeypatch.setattr(HydraConfig, "get", staticmethod(lambda: hydra_cfg))
+    app._isolate_warp_cache()
+    assert ("WARP_CACHE_PATH" in os.environ) == isolated
+    if isolated:
+        assert os.environ["WARP_CACHE_PATH"].endswith(f"-{os.getpid()}")
