@@ -565,7 +565,7 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
     capture = read(_method_parts(cfg.prior.name))
     with stages.stage("ground truth"):
         key = None if kept is None else captures.kept_key(kept, capture_dir, frame, empty_filtered,
-                                                          capture.radar.grid)
+                                                          capture.radar.grid, antenna_files)
         gt = captures.ground_truth(capture_dir, capture, lambda: read((*_method_parts(cfg.prior.name), "mesh")),
                                    kept, key)
     grid = capture.radar.grid

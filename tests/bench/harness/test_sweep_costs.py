@@ -322,3 +322,20 @@ def test_configurations_composed_by_the_workers_equal_those_composed_here():
     finally:
         GlobalHydra.instance().clear()
     assert forked is not None and [OmegaConf.to_yaml(c) for c in forked] == [OmegaConf.to_yaml(c) for c in here]
+
+
+def test_the_ground_truths_key_is_worked_out_once_per_capture_held_in_memory(synth_root, tmp_path, monkeypatch):
+    """Later cells of a process on a capture frame it holds find its ground truth's disk key in memory: the files
+    it names (the capture's metadata parsed anew, ~3 ms a row) are listed once; a fresh process lists them again."""
+    listed = []
+    real = reader.files_read
+    monkeypatch.setattr(reader, "files_read", lambda *a, **k: listed.append(a[2]) or real(*a, **k))
+    monkeypatch.setattr(captures, "_CAPTURES", type(captures._CAPTURES)())
+    monkeypatch.setattr(captures, "_GROUND_TRUTHS", type(captures._GROUND_TRUTHS)())
+    rows = [app.run(_cfg(synth_root, "null", cell, f"store.cache={tmp_path / 'kept'}"), tmp_path / cell)[0]
+            for cell in ("cell=2fsk_d05", "cell=mm2fsk_d10", "cell=2fsk_d10")]
+    assert listed.count(("mesh",)) == 1
+    assert len({row["C_g_px"] for row in rows}) == 1                     # one ground truth for the three cells
+    monkeypatch.setattr(captures, "_CAPTURES", type(captures._CAPTURES)())
+    app.run(_cfg(synth_root, "null", "cell=2fsk_d05", f"store.cache={tmp_path / 'kept'}"), tmp_path / "again")
+    assert listed.count(("mesh",)) == 2
