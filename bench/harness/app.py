@@ -8,6 +8,7 @@ the result store first (bench.harness.store) and only missing cells are computed
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import inspect
@@ -256,25 +257,28 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
                              scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
                              threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
     load_1m = machine_load()
-    helpers = descendants()
-    busy_s, cpu_s, wall_s = busy_cpu_s(), time.process_time(), time.perf_counter()
-    helpers_s = processes_cpu_s(helpers)
-    with stages.stage("methods"):
-        rec = call()
-    columns = {"load_1m": load_1m, "cpu_ms": 1e3 * (time.process_time() - cpu_s),
-               "call_ms": 1e3 * (time.perf_counter() - wall_s)}
-    runtimes_ms = [rec.timings_ms["total"]]
-    budget_ms = 1e3 * float(cfg.timing.budget_s)
-    while len(runtimes_ms) < int(cfg.timing.repeat) and sum(runtimes_ms) + runtimes_ms[0] <= budget_ms:
+    with contextlib.ExitStack() as alone:
+        with stages.stage("metrics"):       # the output process's scoring steps aside (bench.harness.workers.Gate)
+            alone.enter_context(workers.timed_alone())
+        helpers = descendants()
+        busy_s, cpu_s, wall_s = busy_cpu_s(), time.process_time(), time.perf_counter()
+        helpers_s = processes_cpu_s(helpers)
         with stages.stage("methods"):
-            runtimes_ms.append(call().timings_ms["total"])
+            rec = call()
+        columns = {"load_1m": load_1m, "cpu_ms": 1e3 * (time.process_time() - cpu_s),
+                   "call_ms": 1e3 * (time.perf_counter() - wall_s)}
+        runtimes_ms = [rec.timings_ms["total"]]
+        budget_ms = 1e3 * float(cfg.timing.budget_s)
+        while len(runtimes_ms) < int(cfg.timing.repeat) and sum(runtimes_ms) + runtimes_ms[0] <= budget_ms:
+            with stages.stage("methods"):
+                runtimes_ms.append(call().timings_ms["total"])
     # what the rest of the machine used over the timed calls, in cores (/proc/stat counts clock ticks of 10 ms:
     # over windows under 20 ms it says nothing); the job's own child processes (its output writer, the fork server
     # that starts it) are its own, as its writer thread was
-    own_s = time.process_time() - cpu_s + processes_cpu_s(helpers) - helpers_s
-    window_s = time.perf_counter() - wall_s
-    columns["others_cores"] = (max(0.0, busy_cpu_s() - busy_s - own_s) / window_s if window_s >= 0.02
-                               else float("nan"))
+        own_s = time.process_time() - cpu_s + processes_cpu_s(helpers) - helpers_s
+        window_s = time.perf_counter() - wall_s
+        columns["others_cores"] = (max(0.0, busy_cpu_s() - busy_s - own_s) / window_s if window_s >= 0.02
+                                   else float("nan"))
     return rec, {"runtime_ms": statistics.median(runtimes_ms), "runtime_runs": len(runtimes_ms), **columns}
 
 
@@ -492,6 +496,11 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
     then written by the output process (`writing`, bench.harness.workers.output_process) or, without one, the
     writer; else in a worker, which also writes them. A future of (row, arrays, their image or None, the other
     process's seconds by stage)."""
+    if pool is None and isinstance(writing, workers.OutputProcess):    # scored there, between the timed calls
+        task.gt = writing.ship(task.gt)
+        return writing.submit(workers.score_and_write, task, row, out_dir, _stem(row), _grid_attrs(grid),
+                              None if store is None else str(store.root),
+                              _arrays_attrs(grid, row["key"]) if owns_arrays else None)
     if pool is None:
         with stages.stage("metrics"):
             scores, arrays = workers.score(task)

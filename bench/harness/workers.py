@@ -17,6 +17,8 @@ process holding CUDA or threads), and serves every later job of a basic launcher
 """
 from __future__ import annotations
 
+import collections
+import contextlib
 import dataclasses
 import functools
 import logging
@@ -31,6 +33,7 @@ import numpy as np
 
 from bench.harness.results import write_depth
 from methods.domain.capture import RadarGrid
+from metrics import chamfer
 from metrics.chamfer import usable_cores
 from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
@@ -88,14 +91,22 @@ def shipped(gt: GroundTruth | None) -> GroundTruth | Pickled | None:
 def score(task: Scoring) -> tuple[dict, dict]:
     """(metric columns, arrays on the metric grid: depth_m, magnitude, gt_depth_m) of a reconstruction."""
     depth_m = resample_depth_m(task.depth_m, task.computed_grid, task.metric_grid)
+    _pause()
     if task.gt is not None:
         scores, gt_depth_m = evaluate(depth_m, task.gt, faithful=task.faithful), task.gt.depth_m
     else:
         scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
+    _pause()
     magnitude = resample_nearest(task.magnitude, task.computed_grid, task.metric_grid)
     if task.invalid_reason:       # the method's own account of an all-invalid result, not just 'no valid'
         scores["failure"] = task.invalid_reason
     return scores, {"depth_m": depth_m, "magnitude": magnitude, "gt_depth_m": gt_depth_m}
+
+
+def _pause() -> None:
+    """A point where the output process's scoring steps aside for a timed call (`Gate`); nothing elsewhere."""
+    if chamfer.PAUSE is not None:
+        chamfer.PAUSE()
 
 
 @functools.lru_cache(maxsize=4)
@@ -105,15 +116,22 @@ def _store(root: str):
     return Store(root)
 
 
-def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None
-                    ) -> tuple[dict, bytes | None, dict[str, float]]:
-    """In a worker: score the reconstruction into `row` (its score columns), then `write` its files. Returns (row,
-    the arrays' image or None, seconds spent on metrics and outputs)."""
+def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None,
+                    arrays_attrs: dict | None = None) -> tuple[dict, bytes | None, dict[str, float]]:
+    """In a worker or the output process: score the reconstruction into `row` (its score columns), then `write` its
+    files (`arrays_attrs`: as `write`). Returns (row, the arrays' image or None, seconds spent on metrics and
+    outputs). In the output process the task's ground truth is one it holds (`_held_ground_truth`) and the scoring
+    runs holding the gate (`Gate`)."""
     started = time.perf_counter()
-    scores, arrays = score(task)
+    if _HELD is None:
+        scores, arrays = score(task)
+    else:
+        task.gt = _held_ground_truth(task.gt)
+        with _HELD.lock:
+            scores, arrays = score(task)
     row.update(scores)
     scored = time.perf_counter()
-    row, image, seconds = write(row, arrays, task.metric_grid, out_dir, stem, grid_attrs, store_root)
+    row, image, seconds = write(row, arrays, task.metric_grid, out_dir, stem, grid_attrs, store_root, arrays_attrs)
     return row, image, {"metrics": scored - started, **seconds}
 
 
@@ -139,15 +157,143 @@ def write(row: dict, arrays: dict, grid: RadarGrid, out_dir: Path, stem: str, gr
 
 
 def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
-    """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays (without a
-    store: into arrays.h5): one process (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES
-    cores or more where the job runs alone, else None (the job's writer thread writes them, as on 2 cores, where a
-    process would take a core from the methods). A thread shares the interpreter lock with the main thread: on the
-    H100 host its PNG, preview and HDF5 work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind
-    the methods and metrics, and each job began by waiting for the last one's files (Table III: 5.2 s on the
-    thread, 1.3 s waited for). The rows stay timed as they were (the thread did the same work beside the timed
-    calls)."""
-    return None if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES else pool(1)
+    """Where a job without scoring workers scores each computed capture and writes its depth files, cell and
+    compressed arrays (without a store: into arrays.h5): one process (`score_and_write`, started once) on a host of
+    OUTPUT_PROCESS_MIN_CORES cores or more where the job runs alone, else None (the job's main thread scores and its
+    writer thread writes, as on 2 cores, where a process would take a core from the methods). Its scoring overlaps
+    the next captures' reading and reconstruction but never a timed call: the job holds the process's `Gate` over
+    its timed calls, and the process steps aside at the gate between its queries' chunks (metrics.chamfer.PAUSE).
+    Its writing is not held back (a thread shares the interpreter lock with the main thread: on the H100 host its
+    PNG, preview and HDF5 work took 46 ms a capture, ~25 ms on an idle 2-core machine, fell behind the methods and
+    metrics, and each job began by waiting for the last one's files: Table III 5.2 s on the thread, 1.3 s waited
+    for). The rows stay timed as they were."""
+    global _OUTPUT
+    if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES:
+        return None
+    if _OUTPUT is None:
+        try:
+            gate = Gate(multiprocessing.get_context("forkserver"))
+        except (OSError, ImportError) as err:      # no semaphores (no writable /dev/shm)
+            log.warning("no output process on this machine (%s): the job's own threads do its work", err)
+            return None
+        executor = _start_pool(1, _scoring_process, (gate.lock, gate.go))
+        if executor is None:
+            return None
+        _OUTPUT = OutputProcess(executor, gate)
+    return _OUTPUT
+
+
+class Gate:
+    """Who may run now, the job's timed calls or the output process's scoring: the job holds it over its timed calls
+    (`timed`), the process while it scores, stepping aside at `pause` points when the job asks (`go` cleared), so
+    its scoring runs between the timed calls, never beside one. A lock and an event shared between the processes."""
+
+    def __init__(self, context):
+        self.lock, self.go = context.Lock(), context.Event()
+        self.go.set()
+
+    @contextlib.contextmanager
+    def timed(self):
+        self.go.clear()                 # the scorer steps aside at its next pause point, then waits for `go`
+        held = self.lock.acquire(timeout=GATE_WAIT_S)
+        if not held:                    # a process that died holding it: time the call anyway, say so once
+            _warn_once("the output process did not step aside for a timed call within %.0f s", GATE_WAIT_S)
+        try:
+            yield
+        finally:
+            if held:
+                self.lock.release()
+            self.go.set()
+
+
+GATE_WAIT_S = 10.0      # a pause point comes every few ms of scoring; only a process gone wrong takes this long
+_WARNED: set[str] = set()
+
+
+def _warn_once(message: str, *args) -> None:
+    if message not in _WARNED:
+        _WARNED.add(message)
+        log.warning(message, *args)
+
+
+class _Held:
+    """The output process's side of the gate: held while scoring; `pause` lets a waiting timed call run first."""
+
+    def __init__(self, lock, go):
+        self.lock, self.go = lock, go
+
+    def pause(self) -> None:
+        if not self.go.is_set():
+            self.lock.release()
+            self.go.wait()
+            self.lock.acquire()
+
+
+_HELD: _Held | None = None
+
+
+def _scoring_process(lock, go) -> None:
+    """The output process's set-up: queries on every core but the job's main thread's, pausing at the gate."""
+    global _HELD
+    from metrics import chamfer
+
+    _HELD = _Held(lock, go)
+    chamfer.QUERY_THREADS = max(1, usable_cores() - 1)
+    chamfer.PAUSE = _HELD.pause
+
+
+class OutputProcess:
+    """The output process (`output_process`): its executor, its gate, and the ground truths it holds (`ship`)."""
+
+    def __init__(self, executor: ProcessPoolExecutor, gate: Gate):
+        self.executor, self.gate = executor, gate
+        self._held: collections.OrderedDict[int, GroundTruth] = collections.OrderedDict()
+
+    def submit(self, fn, *args):
+        return self.executor.submit(fn, *args)
+
+    def ship(self, gt: GroundTruth | None) -> tuple[int, Pickled | None] | None:
+        """`gt` as a task carries it: (its number, its bytes the first time, else None: the process holds it).
+        The process keeps the last HELD_KEPT it was sent, as this mirror does (its tasks run in submission order)."""
+        if gt is None:
+            return None
+        number = id(gt)                 # unique while the mirror holds `gt`
+        if number in self._held:
+            self._held.move_to_end(number)
+            return number, None
+        _ = gt.points.tree              # built before pickling: the process unpickles it instead of building it
+        self._held[number] = gt
+        if len(self._held) > HELD_KEPT:
+            self._held.popitem(last=False)
+        return number, Pickled(pickle.dumps(gt, protocol=pickle.HIGHEST_PROTOCOL))
+
+
+HELD_KEPT = 16                  # as many as the harness keeps in memory (bench.harness.captures.GROUND_TRUTHS_KEPT)
+_OUTPUT: OutputProcess | None = None
+_GROUND_TRUTHS: collections.OrderedDict = collections.OrderedDict()     # in the output process: number -> GT
+
+
+def _held_ground_truth(shipped_gt: tuple[int, GroundTruth | None] | None) -> GroundTruth | None:
+    """In the output process: the ground truth a task names (`OutputProcess.ship`), kept as its mirror keeps it."""
+    if shipped_gt is None:
+        return None
+    number, gt = shipped_gt
+    if gt is not None:
+        _GROUND_TRUTHS[number] = gt
+        if len(_GROUND_TRUTHS) > HELD_KEPT:
+            _GROUND_TRUTHS.popitem(last=False)
+    _GROUND_TRUTHS.move_to_end(number)
+    return _GROUND_TRUTHS[number]
+
+
+@contextlib.contextmanager
+def timed_alone():
+    """Around a job's timed calls: the output process's scoring steps aside (`Gate`); nothing where there is none."""
+    if _OUTPUT is None:
+        yield
+        return
+    with _OUTPUT.gate.timed():
+        yield
 
 
 def pool_size(setting, device: str, shared: bool = False) -> int:
@@ -168,17 +314,27 @@ def pool(workers: int) -> ProcessPoolExecutor | None:
     if workers <= 0:
         return None
     if workers not in _POOLS:
-        context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
-        try:
-            _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context, initializer=_one_query_thread)
-        except (OSError, ImportError, NotImplementedError) as err:   # no semaphores (no writable /dev/shm)
-            log.warning("no worker processes on this machine (%s): the job's own threads do their work", err)
+        executor = _start_pool(workers, _one_query_thread, ())
+        if executor is None:
             return None
-        # its processes started by another thread: the fork server's imports (~1 s) and the workers' starts happen
-        # while this one goes on (Warp's start, reading, the first reconstruction), not when it hands over work
-        threading.Thread(target=_start, args=(_POOLS[workers], workers), name="workers-start", daemon=True).start()
+        _POOLS[workers] = executor
     return _POOLS[workers]
+
+
+def _start_pool(workers: int, initializer, initargs: tuple) -> ProcessPoolExecutor | None:
+    """`workers` processes from a fresh interpreter (forkserver, preloaded), started by another thread; None where
+    the machine has no semaphores (a warning says so)."""
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
+    try:
+        executor = ProcessPoolExecutor(workers, mp_context=context, initializer=initializer, initargs=initargs)
+    except (OSError, ImportError, NotImplementedError) as err:   # no semaphores (no writable /dev/shm)
+        log.warning("no worker processes on this machine (%s): the job's own threads do their work", err)
+        return None
+    # its processes started by another thread: the fork server's imports (~1 s) and the workers' starts happen
+    # while this one goes on (Warp's start, reading, the first reconstruction), not when it hands over work
+    threading.Thread(target=_start, args=(executor, workers), name="workers-start", daemon=True).start()
+    return executor
 
 
 def _one_query_thread() -> None:
