@@ -21,10 +21,10 @@ if TYPE_CHECKING:
 #: per core each beside the timed calls
 QUERY_THREADS: int | None = None
 LEAF_POINTS = 64
-#: called before each QUERY_CHUNK query points where set: a scoring process beside timed calls steps aside there
+#: called before each QUERY_CHUNK query points where set: the scoring thread steps aside there for a timed call
 #: (bench.harness.workers.Gate); None (the default): every point in one query
 PAUSE: Callable[[], None] | None = None
-QUERY_CHUNK = 2048
+QUERY_CHUNK = 4096
 
 
 def usable_cores() -> int:

@@ -424,6 +424,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     # without a store every row is computed and goes through the output process, whose tasks run one after another:
     # it writes arrays.h5 too (with a store, rows read from it are copied into arrays.h5 here: one writer only)
     owns_arrays = pool is None and writing is not None and store is None
+    scorer = None if pool is not None else workers.scorer(shared=timing == "parallel")  # scores between timed calls
     rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _JobLog()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
@@ -449,7 +450,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 row, task, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
                                                 kept, grid_override, device, timing, identity)
                 row.update(hostname=socket.gethostname(), code_version=cell["code"], key=key)
-                result = _scored(task, row, grid, out_dir, store, pool, writing, writer, owns_arrays)
+                result = _scored(task, row, grid, out_dir, store, pool, writing, writer, owns_arrays, scorer)
                 computed_s.append(time.perf_counter() - started)
             else:
                 row, arrays, attrs = hit
@@ -478,27 +479,28 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
 
 
 def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, store: Store | None, pool, writing,
-            writer: BackgroundWriter, owns_arrays: bool = False):
+            writer: BackgroundWriter, owns_arrays: bool = False, scorer: workers.Scorer | None = None):
     """A computed capture scored (bench.harness.workers): in this thread without a pool, its depth files and cell
     then written by the output process (`writing`, bench.harness.workers.output_process) or, without one, the
     writer; else in a worker, which also writes them. A future of (row, arrays, their image or None, the other
     process's seconds by stage)."""
-    if pool is None and isinstance(writing, workers.OutputProcess):    # scored there, between the timed calls
-        task.gt = writing.ship(task.gt)
-        return writing.submit(workers.score_and_write, task, row, out_dir, _stem(row), _grid_attrs(grid),
-                              None if store is None else str(store.root),
-                              _arrays_attrs(grid, row["key"]) if owns_arrays else None)
     if pool is None:
+        def written(scores: dict, arrays: dict):
+            row.update(scores)
+            if writing is not None:
+                return writing.submit(workers.write, row, arrays, grid, out_dir, _stem(row), _grid_attrs(grid),
+                                      None if store is None else str(store.root),
+                                      _arrays_attrs(grid, row["key"]) if owns_arrays else None)
+            if store is not None:        # before the writer thread copies the cell's arrays into arrays.h5
+                (store.put if scorer is not None else functools.partial(writer.submit, store.put))(
+                    row["key"], row, arrays, _grid_attrs(grid))
+            return workers.done((row, arrays, {}))
+
+        if scorer is not None:
+            return scorer.submit(task, written)
         with stages.stage("metrics"):
             scores, arrays = workers.score(task)
-        row.update(scores)
-        if writing is not None:
-            return writing.submit(workers.write, row, arrays, grid, out_dir, _stem(row), _grid_attrs(grid),
-                                  None if store is None else str(store.root),
-                                  _arrays_attrs(grid, row["key"]) if owns_arrays else None)
-        if store is not None:
-            writer.submit(store.put, row["key"], row, arrays, _grid_attrs(grid))
-        return workers.done((row, arrays, {}))
+        return written(scores, arrays)
     task.gt = workers.shipped(task.gt)
     return pool.submit(workers.score_and_write, task, row, out_dir, _stem(row), _grid_attrs(grid),
                        None if store is None else str(store.root))

@@ -17,7 +17,6 @@ process holding CUDA or threads), and serves every later job of a basic launcher
 """
 from __future__ import annotations
 
-import collections
 import contextlib
 import dataclasses
 import functools
@@ -26,11 +25,12 @@ import multiprocessing
 import pickle
 import threading
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from bench.harness import stages
 from bench.harness.results import write_depth
 from methods.domain.capture import RadarGrid
 from metrics import chamfer
@@ -104,7 +104,7 @@ def score(task: Scoring) -> tuple[dict, dict]:
 
 
 def _pause() -> None:
-    """A point where the output process's scoring steps aside for a timed call (`Gate`); nothing elsewhere."""
+    """A point where the scoring thread steps aside for a timed call (`Gate`); nothing elsewhere."""
     if chamfer.PAUSE is not None:
         chamfer.PAUSE()
 
@@ -116,22 +116,15 @@ def _store(root: str):
     return Store(root)
 
 
-def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None,
-                    arrays_attrs: dict | None = None) -> tuple[dict, bytes | None, dict[str, float]]:
-    """In a worker or the output process: score the reconstruction into `row` (its score columns), then `write` its
-    files (`arrays_attrs`: as `write`). Returns (row, the arrays' image or None, seconds spent on metrics and
-    outputs). In the output process the task's ground truth is one it holds (`_held_ground_truth`) and the scoring
-    runs holding the gate (`Gate`)."""
+def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None
+                    ) -> tuple[dict, bytes | None, dict[str, float]]:
+    """In a worker: score the reconstruction into `row` (its score columns), then `write` its files. Returns (row,
+    the arrays' image or None, seconds spent on metrics and outputs)."""
     started = time.perf_counter()
-    if _HELD is None:
-        scores, arrays = score(task)
-    else:
-        task.gt = _held_ground_truth(task.gt)
-        with _HELD.lock:
-            scores, arrays = score(task)
+    scores, arrays = score(task)
     row.update(scores)
     scored = time.perf_counter()
-    row, image, seconds = write(row, arrays, task.metric_grid, out_dir, stem, grid_attrs, store_root, arrays_attrs)
+    row, image, seconds = write(row, arrays, task.metric_grid, out_dir, stem, grid_attrs, store_root)
     return row, image, {"metrics": scored - started, **seconds}
 
 
@@ -157,143 +150,15 @@ def write(row: dict, arrays: dict, grid: RadarGrid, out_dir: Path, stem: str, gr
 
 
 def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
-    """Where a job without scoring workers scores each computed capture and writes its depth files, cell and
-    compressed arrays (without a store: into arrays.h5): one process (`score_and_write`, started once) on a host of
-    OUTPUT_PROCESS_MIN_CORES cores or more where the job runs alone, else None (the job's main thread scores and its
-    writer thread writes, as on 2 cores, where a process would take a core from the methods). Its scoring overlaps
-    the next captures' reading and reconstruction but never a timed call: the job holds the process's `Gate` over
-    its timed calls, and the process steps aside at the gate between its queries' chunks (metrics.chamfer.PAUSE).
-    Its writing is not held back (a thread shares the interpreter lock with the main thread: on the H100 host its
-    PNG, preview and HDF5 work took 46 ms a capture, ~25 ms on an idle 2-core machine, fell behind the methods and
-    metrics, and each job began by waiting for the last one's files: Table III 5.2 s on the thread, 1.3 s waited
-    for). The rows stay timed as they were."""
-    global _OUTPUT
-    if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES:
-        return None
-    if _OUTPUT is None:
-        try:
-            gate = Gate(multiprocessing.get_context("forkserver"))
-        except (OSError, ImportError) as err:      # no semaphores (no writable /dev/shm)
-            log.warning("no output process on this machine (%s): the job's own threads do its work", err)
-            return None
-        executor = _start_pool(1, _scoring_process, (gate.lock, gate.go))
-        if executor is None:
-            return None
-        _OUTPUT = OutputProcess(executor, gate)
-    return _OUTPUT
-
-
-class Gate:
-    """Who may run now, the job's timed calls or the output process's scoring: the job holds it over its timed calls
-    (`timed`), the process while it scores, stepping aside at `pause` points when the job asks (`go` cleared), so
-    its scoring runs between the timed calls, never beside one. A lock and an event shared between the processes."""
-
-    def __init__(self, context):
-        self.lock, self.go = context.Lock(), context.Event()
-        self.go.set()
-
-    @contextlib.contextmanager
-    def timed(self):
-        self.go.clear()                 # the scorer steps aside at its next pause point, then waits for `go`
-        held = self.lock.acquire(timeout=GATE_WAIT_S)
-        if not held:                    # a process that died holding it: time the call anyway, say so once
-            _warn_once("the output process did not step aside for a timed call within %.0f s", GATE_WAIT_S)
-        try:
-            yield
-        finally:
-            if held:
-                self.lock.release()
-            self.go.set()
-
-
-GATE_WAIT_S = 10.0      # a pause point comes every few ms of scoring; only a process gone wrong takes this long
-_WARNED: set[str] = set()
-
-
-def _warn_once(message: str, *args) -> None:
-    if message not in _WARNED:
-        _WARNED.add(message)
-        log.warning(message, *args)
-
-
-class _Held:
-    """The output process's side of the gate: held while scoring; `pause` lets a waiting timed call run first."""
-
-    def __init__(self, lock, go):
-        self.lock, self.go = lock, go
-
-    def pause(self) -> None:
-        if not self.go.is_set():
-            self.lock.release()
-            self.go.wait()
-            self.lock.acquire()
-
-
-_HELD: _Held | None = None
-
-
-def _scoring_process(lock, go) -> None:
-    """The output process's set-up: queries on every core but the job's main thread's, pausing at the gate."""
-    global _HELD
-    from metrics import chamfer
-
-    _HELD = _Held(lock, go)
-    chamfer.QUERY_THREADS = max(1, usable_cores() - 1)
-    chamfer.PAUSE = _HELD.pause
-
-
-class OutputProcess:
-    """The output process (`output_process`): its executor, its gate, and the ground truths it holds (`ship`)."""
-
-    def __init__(self, executor: ProcessPoolExecutor, gate: Gate):
-        self.executor, self.gate = executor, gate
-        self._held: collections.OrderedDict[int, GroundTruth] = collections.OrderedDict()
-
-    def submit(self, fn, *args):
-        return self.executor.submit(fn, *args)
-
-    def ship(self, gt: GroundTruth | None) -> tuple[int, Pickled | None] | None:
-        """`gt` as a task carries it: (its number, its bytes the first time, else None: the process holds it).
-        The process keeps the last HELD_KEPT it was sent, as this mirror does (its tasks run in submission order)."""
-        if gt is None:
-            return None
-        number = id(gt)                 # unique while the mirror holds `gt`
-        if number in self._held:
-            self._held.move_to_end(number)
-            return number, None
-        _ = gt.points.tree              # built before pickling: the process unpickles it instead of building it
-        self._held[number] = gt
-        if len(self._held) > HELD_KEPT:
-            self._held.popitem(last=False)
-        return number, Pickled(pickle.dumps(gt, protocol=pickle.HIGHEST_PROTOCOL))
-
-
-HELD_KEPT = 16                  # as many as the harness keeps in memory (bench.harness.captures.GROUND_TRUTHS_KEPT)
-_OUTPUT: OutputProcess | None = None
-_GROUND_TRUTHS: collections.OrderedDict = collections.OrderedDict()     # in the output process: number -> GT
-
-
-def _held_ground_truth(shipped_gt: tuple[int, GroundTruth | None] | None) -> GroundTruth | None:
-    """In the output process: the ground truth a task names (`OutputProcess.ship`), kept as its mirror keeps it."""
-    if shipped_gt is None:
-        return None
-    number, gt = shipped_gt
-    if gt is not None:
-        _GROUND_TRUTHS[number] = gt
-        if len(_GROUND_TRUTHS) > HELD_KEPT:
-            _GROUND_TRUTHS.popitem(last=False)
-    _GROUND_TRUTHS.move_to_end(number)
-    return _GROUND_TRUTHS[number]
-
-
-@contextlib.contextmanager
-def timed_alone():
-    """Around a job's timed calls: the output process's scoring steps aside (`Gate`); nothing where there is none."""
-    if _OUTPUT is None:
-        yield
-        return
-    with _OUTPUT.gate.timed():
-        yield
+    """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays (without a
+    store: into arrays.h5): one process (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES
+    cores or more where the job runs alone, else None (the job's writer thread writes them, as on 2 cores, where a
+    process would take a core from the methods). A thread shares the interpreter lock with the main thread: on the
+    H100 host its PNG, preview and HDF5 work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind
+    the methods and metrics, and each job began by waiting for the last one's files (Table III: 5.2 s on the
+    thread, 1.3 s waited for). The rows stay timed as they were (the thread did the same work beside the timed
+    calls)."""
+    return None if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES else pool(1)
 
 
 def pool_size(setting, device: str, shared: bool = False) -> int:
@@ -314,27 +179,17 @@ def pool(workers: int) -> ProcessPoolExecutor | None:
     if workers <= 0:
         return None
     if workers not in _POOLS:
-        executor = _start_pool(workers, _one_query_thread, ())
-        if executor is None:
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
+        try:
+            _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context, initializer=_one_query_thread)
+        except (OSError, ImportError, NotImplementedError) as err:   # no semaphores (no writable /dev/shm)
+            log.warning("no worker processes on this machine (%s): the job's own threads do their work", err)
             return None
-        _POOLS[workers] = executor
+        # its processes started by another thread: the fork server's imports (~1 s) and the workers' starts happen
+        # while this one goes on (Warp's start, reading, the first reconstruction), not when it hands over work
+        threading.Thread(target=_start, args=(_POOLS[workers], workers), name="workers-start", daemon=True).start()
     return _POOLS[workers]
-
-
-def _start_pool(workers: int, initializer, initargs: tuple) -> ProcessPoolExecutor | None:
-    """`workers` processes from a fresh interpreter (forkserver, preloaded), started by another thread; None where
-    the machine has no semaphores (a warning says so)."""
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
-    try:
-        executor = ProcessPoolExecutor(workers, mp_context=context, initializer=initializer, initargs=initargs)
-    except (OSError, ImportError, NotImplementedError) as err:   # no semaphores (no writable /dev/shm)
-        log.warning("no worker processes on this machine (%s): the job's own threads do their work", err)
-        return None
-    # its processes started by another thread: the fork server's imports (~1 s) and the workers' starts happen
-    # while this one goes on (Warp's start, reading, the first reconstruction), not when it hands over work
-    threading.Thread(target=_start, args=(executor, workers), name="workers-start", daemon=True).start()
-    return executor
 
 
 def _one_query_thread() -> None:
@@ -348,6 +203,102 @@ def _start(pool: ProcessPoolExecutor, workers: int) -> None:
     """Start every worker (a pool starts one per task handed over while none is idle)."""
     for started in [pool.submit(int) for _ in range(workers)]:
         started.result()
+
+
+class Gate:
+    """Who may run now, the job's timed calls or its scoring thread: the job holds it over its timed calls (`timed`),
+    the scoring thread while it scores, stepping aside at `pause` points when the job asks (`go` cleared) and waiting
+    for the call's end: scoring then overlaps the job's reading, set-up and output files, never a timed call."""
+
+    def __init__(self):
+        self.lock, self.go = threading.Lock(), threading.Event()
+        self.go.set()
+        self._scoring = threading.local()
+
+    @contextlib.contextmanager
+    def timed(self):
+        self.go.clear()                 # the scoring thread steps aside at its next pause point
+        self.lock.acquire()
+        try:
+            yield
+        finally:
+            self.lock.release()
+            self.go.set()
+
+    @contextlib.contextmanager
+    def scoring(self):
+        """Held by the scoring thread while it scores (its `pause` points act only there)."""
+        with self.lock:
+            self._scoring.held = True
+            try:
+                yield
+            finally:
+                self._scoring.held = False
+
+    def pause(self) -> None:
+        if not self.go.is_set() and getattr(self._scoring, "held", False):
+            self.lock.release()
+            self.go.wait()
+            self.lock.acquire()
+
+
+class Scorer:
+    """The job's scoring thread (`scorer`): scores each computed capture while the main thread reads and reconstructs
+    the next one, holding the `Gate` the timed calls take, then hands the capture's files on (`then`)."""
+
+    def __init__(self):
+        self.gate = Gate()
+        self._thread = ThreadPoolExecutor(1, thread_name_prefix="scoring")
+        chamfer.PAUSE = self.gate.pause
+
+    def submit(self, task: Scoring, then) -> Future:
+        """A future of what `then(scores, arrays)` returns or, where that is a future, of its result: the row's
+        (row, arrays, seconds by stage elsewhere) once scored and written."""
+        outer = Future()
+
+        def scored() -> None:
+            try:
+                with stages.stage("metrics"), self.gate.scoring():
+                    scores, arrays = score(task)
+                inner = then(scores, arrays)
+            except BaseException as err:         # the writer thread raises it in capture order
+                outer.set_exception(err)
+                return
+            if not isinstance(inner, Future):
+                outer.set_result(inner)
+                return
+            inner.add_done_callback(lambda f: outer.set_exception(f.exception()) if f.exception() is not None
+                                    else outer.set_result(f.result()))
+
+        self._thread.submit(scored)
+        return outer
+
+
+_SCORER: Scorer | None = None
+
+
+def scorer(shared: bool = False) -> Scorer | None:
+    """The process's scoring thread where the job runs alone on a host of OUTPUT_PROCESS_MIN_CORES cores or more
+    (its queries' threads then have cores the main thread does not use); else None (the main thread scores). On the
+    H100 host the main thread's scoring took 1.8 s of Table III's 112 rows (16 ms a row), before the next capture
+    could be read; beside the timed calls it would move their runtimes (scoring workers did: +5-80 %), hence the
+    gate. Started once, kept for the process's later jobs."""
+    global _SCORER
+    if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES:
+        return None
+    if _SCORER is None:
+        _SCORER = Scorer()
+    return _SCORER
+
+
+@contextlib.contextmanager
+def timed_alone():
+    """Around a job's timed calls: its scoring thread steps aside (`Gate`); nothing where there is none."""
+    if _SCORER is None:
+        yield
+        return
+    with _SCORER.gate.timed():
+        yield
 
 
 def done(value) -> Future:

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import logging
-import multiprocessing
-import pickle
 import threading
 import time
 from pathlib import Path
@@ -102,7 +100,6 @@ def test_no_worker_processes_where_the_machine_cannot_make_a_pool(monkeypatch, c
 
     monkeypatch.setattr(workers, "ProcessPoolExecutor", no_shm)
     monkeypatch.setattr(workers, "_POOLS", {})
-    monkeypatch.setattr(workers, "_OUTPUT", None)
     monkeypatch.setattr(workers, "usable_cores", lambda: 16)
     with caplog.at_level(logging.WARNING, logger="bench"):
         assert workers.output_process() is None
@@ -111,10 +108,10 @@ def test_no_worker_processes_where_the_machine_cannot_make_a_pool(monkeypatch, c
 
 @pytest.mark.parametrize("with_store", [True, False])
 def test_files_written_by_the_output_process_are_the_writer_threads(root, tmp_path, monkeypatch, with_store):
-    """Without scoring workers, a host of OUTPUT_PROCESS_MIN_CORES cores scores each capture and writes its depth
-    files, cell and compressed arrays (without a store: into arrays.h5) in one process instead of the main and
-    writer threads: the same rows (every score), files, arrays and cells, and the rows timed as before (alone, or
-    contended on a busy machine)."""
+    """Without scoring workers, a host of OUTPUT_PROCESS_MIN_CORES cores scores each capture on the job's scoring
+    thread, between its timed calls, and writes its depth files, cell and compressed arrays (without a store: into
+    arrays.h5) in one process instead of the writer thread: the same rows (every score), files, arrays and cells,
+    and the rows timed as before (alone, or contended on a busy machine)."""
     rows, stores, handed = {}, {}, []
     monkeypatch.setattr(workers, "OUTPUT_PROCESS_MIN_CORES", 1)
     process = workers.output_process()
@@ -137,9 +134,8 @@ def test_files_written_by_the_output_process_are_the_writer_threads(root, tmp_pa
         assert len(list((stores["process"] / "cells").glob("*.h5"))) == 2
         assert all(r["cached"] for r in _run(root, tmp_path / "again", stores["process"], 0))
     assert {r["timing"] for r in rows["process"]} <= {"alone", "contended"}
-    # the process scored both captures and wrote their files, without a store their arrays into arrays.h5 (its one
-    # writer)
-    assert handed == [("score_and_write", not with_store)] * 2
+    # the process wrote both captures' files, and without a store their arrays into arrays.h5 (its one writer)
+    assert handed == [("write", not with_store)] * 2
 
 
 def test_a_run_that_defers_its_files_is_complete_once_they_are_finished(root, tmp_path):
@@ -214,17 +210,16 @@ def test_a_deferred_run_logs_into_its_own_file_and_leaves_it_closed(root, tmp_pa
     assert (tmp_path / "app.log").read_text().count(": computed,") == 2
 
 
-def test_the_output_processs_scoring_steps_aside_for_every_timed_call():
-    """The job holds the gate over its timed calls; the scorer, holding it while it works, lets a waiting call in at
-    its next pause point and waits for the call's end: no step of its work overlaps a timed window."""
-    gate = workers.Gate(multiprocessing.get_context("forkserver"))
-    held = workers._Held(gate.lock, gate.go)
+def test_the_scoring_thread_steps_aside_for_every_timed_call():
+    """The job holds the gate over its timed calls; the scoring thread, holding it while it scores, lets a waiting
+    call in at its next pause point and waits for the call's end: no step of its work overlaps a timed window."""
+    gate = workers.Gate()
     steps, windows = [], []
 
     def scorer():
-        with gate.lock:
+        with gate.scoring():
             for _ in range(400):
-                held.pause()
+                gate.pause()
                 started = time.perf_counter()
                 time.sleep(0.0005)              # a chunk of work between two pause points
                 steps.append((started, time.perf_counter()))
@@ -239,19 +234,21 @@ def test_the_output_processs_scoring_steps_aside_for_every_timed_call():
             time.sleep(0.01)
             windows.append((started, time.perf_counter()))
         time.sleep(0.005)
+    gate.pause()                                # elsewhere than on the scoring thread: nothing
     thread.join()
-    assert len(steps) == 400 and windows[-1][1] < steps[-1][0]          # the scorer worked on around the calls
+    assert len(steps) == 400 and windows[-1][1] < steps[-1][0]          # it worked on around the calls
     assert not [(s, w) for s in steps for w in windows if s[0] < w[1] and w[0] < s[1]]
 
 
 def test_chunked_queries_give_the_one_querys_distances(monkeypatch):
-    """With a pause hook (the output process), a query runs in chunks with a pause before each: bit for bit the
+    """With a pause hook (the scoring thread's), a query runs in chunks with a pause before each: bit for bit the
     distances of one query over every point."""
     from metrics import chamfer
 
     rng = np.random.default_rng(5)
     target = chamfer.PointSet(rng.normal(size=(3000, 3)))
     source = rng.normal(size=(5 * chamfer.QUERY_CHUNK + 17, 3)) * 1.5
+    monkeypatch.setattr(chamfer, "PAUSE", None)
     whole = chamfer.nearest_distances_m(source, target)
     pauses = []
     monkeypatch.setattr(chamfer, "PAUSE", lambda: pauses.append(1))
@@ -260,19 +257,13 @@ def test_chunked_queries_give_the_one_querys_distances(monkeypatch):
     assert chamfer.one_sided_chamfer_m(source, target) == float(np.mean(whole))
 
 
-def test_the_output_process_gets_each_ground_truth_once_while_it_holds_it(monkeypatch):
-    """A task names a ground truth the output process holds (its bytes go with the first task only); the process
-    keeps the last HELD_KEPT it was sent as the job's mirror does, so a named one is always there."""
-    from metrics.chamfer import PointSet
-
-    monkeypatch.setattr(workers, "HELD_KEPT", 3)
-    monkeypatch.setattr(workers, "_GROUND_TRUTHS", type(workers._GROUND_TRUTHS)())
-    process = workers.OutputProcess(executor=None, gate=None)
-    truths = [workers.GroundTruth(None, np.full((2, 2), float(i)), PointSet(np.eye(3) * i), None, None, {}, 0, None)
-              for i in range(5)]
-    sent = 0
-    for i in [0, 1, 0, 2, 3, 0, 1, 4, 4, 2, 0]:
-        shipped = pickle.loads(pickle.dumps(process.ship(truths[i])))      # as a task carries it
-        sent += shipped[1] is not None
-        assert workers._held_ground_truth(shipped).depth_m[0, 0] == i
-    assert sent == 8 and process.ship(None) is None and workers._held_ground_truth(None) is None
+def test_a_scoring_threads_failure_fails_the_run_in_capture_order(monkeypatch):
+    """What the scoring thread raises reaches the writer thread through the capture's future, as a worker's does."""
+    scorer = workers.Scorer()
+    monkeypatch.setattr(workers, "score", lambda task: (_ for _ in ()).throw(ValueError("bad map")))
+    failed = scorer.submit(None, lambda scores, arrays: None)
+    with pytest.raises(ValueError, match="bad map"):
+        failed.result(timeout=10)
+    monkeypatch.setattr(workers, "score", lambda task: ({"P_cm": 1.0}, {}))
+    written = scorer.submit(None, lambda scores, arrays: workers.done(({**scores}, arrays, {})))
+    assert written.result(timeout=10) == ({"P_cm": 1.0}, {}, {})
