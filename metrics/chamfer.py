@@ -6,7 +6,6 @@ reconstruction. Build the ground-truth tree once per capture (`PointSet`) and re
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -21,10 +20,6 @@ if TYPE_CHECKING:
 #: per core each beside the timed calls
 QUERY_THREADS: int | None = None
 LEAF_POINTS = 64
-#: called before each QUERY_CHUNK query points where set: the scoring thread steps aside there for a timed call
-#: (bench.harness.workers.Gate); None (the default): every point in one query
-PAUSE: Callable[[], None] | None = None
-QUERY_CHUNK = 4096
 
 
 def usable_cores() -> int:
@@ -58,20 +53,9 @@ class PointSet:
 
 
 def nearest_distances_m(src_m: np.ndarray, dst: PointSet) -> np.ndarray:
-    """Distance (m) from every source point to its nearest destination point; (N,) float64. With `PAUSE` set, in
-    chunks of QUERY_CHUNK points, `PAUSE()` before each: the same distances (a point's nearest one does not depend
-    on the other points of its query)."""
-    src_m = np.asarray(src_m, dtype=np.float64)
-    workers = QUERY_THREADS or usable_cores()
-    if PAUSE is None or len(src_m) <= QUERY_CHUNK:
-        if PAUSE is not None:
-            PAUSE()
-        return dst.tree.query(src_m, k=1, workers=workers)[0]
-    chunks = []
-    for start in range(0, len(src_m), QUERY_CHUNK):
-        PAUSE()
-        chunks.append(dst.tree.query(src_m[start:start + QUERY_CHUNK], k=1, workers=workers)[0])
-    return np.concatenate(chunks)
+    """Distance (m) from every source point to its nearest destination point; (N,) float64."""
+    distances, _ = dst.tree.query(np.asarray(src_m, dtype=np.float64), k=1, workers=QUERY_THREADS or usable_cores())
+    return distances
 
 
 def one_sided_chamfer_m(src_m: np.ndarray, dst: PointSet) -> float:

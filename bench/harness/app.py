@@ -8,7 +8,6 @@ the result store first (bench.harness.store) and only missing cells are computed
 """
 from __future__ import annotations
 
-import contextlib
 import functools
 import hashlib
 import inspect
@@ -249,23 +248,20 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
                              scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
                              threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
     load_1m = machine_load()
-    with contextlib.ExitStack() as alone:
-        with stages.stage("metrics"):       # the output process's scoring steps aside (bench.harness.workers.Gate)
-            alone.enter_context(workers.timed_alone())
-        start = sizing.CLOCK.sample()
-        cpu_s, wall_s = time.process_time(), time.perf_counter()
+    start = sizing.CLOCK.sample()
+    cpu_s, wall_s = time.process_time(), time.perf_counter()
+    with stages.stage("methods"):
+        rec = call()
+    columns = {"load_1m": load_1m, "cpu_ms": 1e3 * (time.process_time() - cpu_s),
+               "call_ms": 1e3 * (time.perf_counter() - wall_s)}
+    runtimes_ms = [rec.timings_ms["total"]]
+    budget_ms = 1e3 * float(cfg.timing.budget_s)
+    while len(runtimes_ms) < int(cfg.timing.repeat) and sum(runtimes_ms) + runtimes_ms[0] <= budget_ms:
         with stages.stage("methods"):
-            rec = call()
-        columns = {"load_1m": load_1m, "cpu_ms": 1e3 * (time.process_time() - cpu_s),
-                   "call_ms": 1e3 * (time.perf_counter() - wall_s)}
-        runtimes_ms = [rec.timings_ms["total"]]
-        budget_ms = 1e3 * float(cfg.timing.budget_s)
-        while len(runtimes_ms) < int(cfg.timing.repeat) and sum(runtimes_ms) + runtimes_ms[0] <= budget_ms:
-            with stages.stage("methods"):
-                runtimes_ms.append(call().timings_ms["total"])
-        # what the rest of the machine used over the timed calls, in cores (over a short call's last 0.2 s:
-        # bench.harness.sizing.CpuClock)
-        columns["others_cores"] = sizing.CLOCK.others_cores(start, sizing.CLOCK.sample())
+            runtimes_ms.append(call().timings_ms["total"])
+    # what the rest of the machine used over the timed calls, in cores (over a short call's last 0.2 s or more:
+    # bench.harness.sizing.CpuClock)
+    columns["others_cores"] = sizing.CLOCK.others_cores(start, sizing.CLOCK.sample())
     return rec, {"runtime_ms": statistics.median(runtimes_ms), "runtime_runs": len(runtimes_ms), **columns}
 
 
@@ -424,7 +420,6 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     # without a store every row is computed and goes through the output process, whose tasks run one after another:
     # it writes arrays.h5 too (with a store, rows read from it are copied into arrays.h5 here: one writer only)
     owns_arrays = pool is None and writing is not None and store is None
-    scorer = None if pool is not None else workers.scorer(shared=timing == "parallel")  # scores between timed calls
     rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _JobLog()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
@@ -450,7 +445,7 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 row, task, grid = _computed_row(cfg, method, capture_dir, frame, empty_filtered, antenna_files,
                                                 kept, grid_override, device, timing, identity)
                 row.update(hostname=socket.gethostname(), code_version=cell["code"], key=key)
-                result = _scored(task, row, grid, out_dir, store, pool, writing, writer, owns_arrays, scorer)
+                result = _scored(task, row, grid, out_dir, store, pool, writing, writer, owns_arrays)
                 computed_s.append(time.perf_counter() - started)
             else:
                 row, arrays, attrs = hit
@@ -479,28 +474,22 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
 
 
 def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, store: Store | None, pool, writing,
-            writer: BackgroundWriter, owns_arrays: bool = False, scorer: workers.Scorer | None = None):
+            writer: BackgroundWriter, owns_arrays: bool = False):
     """A computed capture scored (bench.harness.workers): in this thread without a pool, its depth files and cell
     then written by the output process (`writing`, bench.harness.workers.output_process) or, without one, the
     writer; else in a worker, which also writes them. A future of (row, arrays, their image or None, the other
     process's seconds by stage)."""
     if pool is None:
-        def written(scores: dict, arrays: dict):
-            row.update(scores)
-            if writing is not None:
-                return writing.submit(workers.write, row, arrays, grid, out_dir, _stem(row), _grid_attrs(grid),
-                                      None if store is None else str(store.root),
-                                      _arrays_attrs(grid, row["key"]) if owns_arrays else None)
-            if store is not None:        # before the writer thread copies the cell's arrays into arrays.h5
-                (store.put if scorer is not None else functools.partial(writer.submit, store.put))(
-                    row["key"], row, arrays, _grid_attrs(grid))
-            return workers.done((row, arrays, {}))
-
-        if scorer is not None:
-            return scorer.submit(task, written)
         with stages.stage("metrics"):
             scores, arrays = workers.score(task)
-        return written(scores, arrays)
+        row.update(scores)
+        if writing is not None:
+            return writing.submit(workers.write, row, arrays, grid, out_dir, _stem(row), _grid_attrs(grid),
+                                  None if store is None else str(store.root),
+                                  _arrays_attrs(grid, row["key"]) if owns_arrays else None)
+        if store is not None:
+            writer.submit(store.put, row["key"], row, arrays, _grid_attrs(grid))
+        return workers.done((row, arrays, {}))
     task.gt = workers.shipped(task.gt)
     return pool.submit(workers.score_and_write, task, row, out_dir, _stem(row), _grid_attrs(grid),
                        None if store is None else str(store.root))

@@ -17,7 +17,6 @@ process holding CUDA or threads), and serves every later job of a basic launcher
 """
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
 import logging
@@ -25,15 +24,13 @@ import multiprocessing
 import pickle
 import threading
 import time
-from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from bench.harness import stages
 from bench.harness.results import write_depth
 from methods.domain.capture import RadarGrid
-from metrics import chamfer
 from metrics.chamfer import usable_cores
 from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
@@ -91,22 +88,14 @@ def shipped(gt: GroundTruth | None) -> GroundTruth | Pickled | None:
 def score(task: Scoring) -> tuple[dict, dict]:
     """(metric columns, arrays on the metric grid: depth_m, magnitude, gt_depth_m) of a reconstruction."""
     depth_m = resample_depth_m(task.depth_m, task.computed_grid, task.metric_grid)
-    _pause()
     if task.gt is not None:
         scores, gt_depth_m = evaluate(depth_m, task.gt, faithful=task.faithful), task.gt.depth_m
     else:
         scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
-    _pause()
     magnitude = resample_nearest(task.magnitude, task.computed_grid, task.metric_grid)
     if task.invalid_reason:       # the method's own account of an all-invalid result, not just 'no valid'
         scores["failure"] = task.invalid_reason
     return scores, {"depth_m": depth_m, "magnitude": magnitude, "gt_depth_m": gt_depth_m}
-
-
-def _pause() -> None:
-    """A point where the scoring thread steps aside for a timed call (`Gate`); nothing elsewhere."""
-    if chamfer.PAUSE is not None:
-        chamfer.PAUSE()
 
 
 @functools.lru_cache(maxsize=4)
@@ -203,102 +192,6 @@ def _start(pool: ProcessPoolExecutor, workers: int) -> None:
     """Start every worker (a pool starts one per task handed over while none is idle)."""
     for started in [pool.submit(int) for _ in range(workers)]:
         started.result()
-
-
-class Gate:
-    """Who may run now, the job's timed calls or its scoring thread: the job holds it over its timed calls (`timed`),
-    the scoring thread while it scores, stepping aside at `pause` points when the job asks (`go` cleared) and waiting
-    for the call's end: scoring then overlaps the job's reading, set-up and output files, never a timed call."""
-
-    def __init__(self):
-        self.lock, self.go = threading.Lock(), threading.Event()
-        self.go.set()
-        self._scoring = threading.local()
-
-    @contextlib.contextmanager
-    def timed(self):
-        self.go.clear()                 # the scoring thread steps aside at its next pause point
-        self.lock.acquire()
-        try:
-            yield
-        finally:
-            self.lock.release()
-            self.go.set()
-
-    @contextlib.contextmanager
-    def scoring(self):
-        """Held by the scoring thread while it scores (its `pause` points act only there)."""
-        with self.lock:
-            self._scoring.held = True
-            try:
-                yield
-            finally:
-                self._scoring.held = False
-
-    def pause(self) -> None:
-        if not self.go.is_set() and getattr(self._scoring, "held", False):
-            self.lock.release()
-            self.go.wait()
-            self.lock.acquire()
-
-
-class Scorer:
-    """The job's scoring thread (`scorer`): scores each computed capture while the main thread reads and reconstructs
-    the next one, holding the `Gate` the timed calls take, then hands the capture's files on (`then`)."""
-
-    def __init__(self):
-        self.gate = Gate()
-        self._thread = ThreadPoolExecutor(1, thread_name_prefix="scoring")
-        chamfer.PAUSE = self.gate.pause
-
-    def submit(self, task: Scoring, then) -> Future:
-        """A future of what `then(scores, arrays)` returns or, where that is a future, of its result: the row's
-        (row, arrays, seconds by stage elsewhere) once scored and written."""
-        outer = Future()
-
-        def scored() -> None:
-            try:
-                with stages.stage("metrics"), self.gate.scoring():
-                    scores, arrays = score(task)
-                inner = then(scores, arrays)
-            except BaseException as err:         # the writer thread raises it in capture order
-                outer.set_exception(err)
-                return
-            if not isinstance(inner, Future):
-                outer.set_result(inner)
-                return
-            inner.add_done_callback(lambda f: outer.set_exception(f.exception()) if f.exception() is not None
-                                    else outer.set_result(f.result()))
-
-        self._thread.submit(scored)
-        return outer
-
-
-_SCORER: Scorer | None = None
-
-
-def scorer(shared: bool = False) -> Scorer | None:
-    """The process's scoring thread where the job runs alone on a host of OUTPUT_PROCESS_MIN_CORES cores or more
-    (its queries' threads then have cores the main thread does not use); else None (the main thread scores). On the
-    H100 host the main thread's scoring took 1.8 s of Table III's 112 rows (16 ms a row), before the next capture
-    could be read; beside the timed calls it would move their runtimes (scoring workers did: +5-80 %), hence the
-    gate. Started once, kept for the process's later jobs."""
-    global _SCORER
-    if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES:
-        return None
-    if _SCORER is None:
-        _SCORER = Scorer()
-    return _SCORER
-
-
-@contextlib.contextmanager
-def timed_alone():
-    """Around a job's timed calls: its scoring thread steps aside (`Gate`); nothing where there is none."""
-    if _SCORER is None:
-        yield
-        return
-    with _SCORER.gate.timed():
-        yield
 
 
 def done(value) -> Future:

@@ -108,10 +108,9 @@ def test_no_worker_processes_where_the_machine_cannot_make_a_pool(monkeypatch, c
 
 @pytest.mark.parametrize("with_store", [True, False])
 def test_files_written_by_the_output_process_are_the_writer_threads(root, tmp_path, monkeypatch, with_store):
-    """Without scoring workers, a host of OUTPUT_PROCESS_MIN_CORES cores scores each capture on the job's scoring
-    thread, between its timed calls, and writes its depth files, cell and compressed arrays (without a store: into
-    arrays.h5) in one process instead of the writer thread: the same rows (every score), files, arrays and cells,
-    and the rows timed as before (alone, or contended on a busy machine)."""
+    """Without scoring workers, a host of OUTPUT_PROCESS_MIN_CORES cores writes each capture's depth files, cell and
+    compressed arrays (without a store: into arrays.h5) in one process instead of the writer thread: the same rows,
+    files, arrays and cells, and the rows timed as before (alone, or contended on a busy machine)."""
     rows, stores, handed = {}, {}, []
     monkeypatch.setattr(workers, "OUTPUT_PROCESS_MIN_CORES", 1)
     process = workers.output_process()
@@ -208,62 +207,3 @@ def test_a_deferred_run_logs_into_its_own_file_and_leaves_it_closed(root, tmp_pa
         app.log.setLevel(level)
     assert handler.stream is None                          # closed again after the writer's reopening lines
     assert (tmp_path / "app.log").read_text().count(": computed,") == 2
-
-
-def test_the_scoring_thread_steps_aside_for_every_timed_call():
-    """The job holds the gate over its timed calls; the scoring thread, holding it while it scores, lets a waiting
-    call in at its next pause point and waits for the call's end: no step of its work overlaps a timed window."""
-    gate = workers.Gate()
-    steps, windows = [], []
-
-    def scorer():
-        with gate.scoring():
-            for _ in range(400):
-                gate.pause()
-                started = time.perf_counter()
-                time.sleep(0.0005)              # a chunk of work between two pause points
-                steps.append((started, time.perf_counter()))
-
-    thread = threading.Thread(target=scorer)
-    thread.start()
-    while not steps:
-        time.sleep(0.001)
-    for _ in range(5):
-        with gate.timed():
-            started = time.perf_counter()
-            time.sleep(0.01)
-            windows.append((started, time.perf_counter()))
-        time.sleep(0.005)
-    gate.pause()                                # elsewhere than on the scoring thread: nothing
-    thread.join()
-    assert len(steps) == 400 and windows[-1][1] < steps[-1][0]          # it worked on around the calls
-    assert not [(s, w) for s in steps for w in windows if s[0] < w[1] and w[0] < s[1]]
-
-
-def test_chunked_queries_give_the_one_querys_distances(monkeypatch):
-    """With a pause hook (the scoring thread's), a query runs in chunks with a pause before each: bit for bit the
-    distances of one query over every point."""
-    from metrics import chamfer
-
-    rng = np.random.default_rng(5)
-    target = chamfer.PointSet(rng.normal(size=(3000, 3)))
-    source = rng.normal(size=(5 * chamfer.QUERY_CHUNK + 17, 3)) * 1.5
-    monkeypatch.setattr(chamfer, "PAUSE", None)
-    whole = chamfer.nearest_distances_m(source, target)
-    pauses = []
-    monkeypatch.setattr(chamfer, "PAUSE", lambda: pauses.append(1))
-    chunked = chamfer.nearest_distances_m(source, target)
-    assert len(pauses) == 6 and chunked.tobytes() == whole.tobytes()
-    assert chamfer.one_sided_chamfer_m(source, target) == float(np.mean(whole))
-
-
-def test_a_scoring_threads_failure_fails_the_run_in_capture_order(monkeypatch):
-    """What the scoring thread raises reaches the writer thread through the capture's future, as a worker's does."""
-    scorer = workers.Scorer()
-    monkeypatch.setattr(workers, "score", lambda task: (_ for _ in ()).throw(ValueError("bad map")))
-    failed = scorer.submit(None, lambda scores, arrays: None)
-    with pytest.raises(ValueError, match="bad map"):
-        failed.result(timeout=10)
-    monkeypatch.setattr(workers, "score", lambda task: ({"P_cm": 1.0}, {}))
-    written = scorer.submit(None, lambda scores, arrays: workers.done(({**scores}, arrays, {})))
-    assert written.result(timeout=10) == ({"P_cm": 1.0}, {}, {})
