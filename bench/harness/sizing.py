@@ -8,8 +8,9 @@
   machine: joblib with more than one worker, submitit_local, SLURM arrays with array_parallelism > 1, any other
   launcher). Results rows carry it in the column `timing`, with 'contended' for a row the app timed alone while
   other processes kept the cores busy during its call (`contended`: on Linux, the CPU time every other process
-  used during the call, from /proc/stat minus our own, column `others_cores`, above half a core on average;
-  elsewhere the 1-minute load average, column `load_1m`, above the number of cores).
+  used during the call, from /proc/stat minus our own, column `others_cores`, above half a core on average; a call
+  shorter than 0.2 s is judged over the last 0.2 s of calls, `CpuClock`; elsewhere the 1-minute load average,
+  column `load_1m`, above the number of cores).
 """
 from __future__ import annotations
 
