@@ -5,8 +5,9 @@ DIR]]`:
    capture, before any sweep starts (cached: a re-run finds every capture up to date in milliseconds).
 2. Runs the paper's experiments `table2` and `table3` as Hydra multiruns, exactly as `python -m bench -m
    experiment=NAME` would (the default launcher, inprocess): one job at a time, so every runtime in the tables is
-   measured alone (rows get `timing=alone`; stored rows timed beside other jobs are re-measured). Finished cells come from
-   the result store (`--store`), so a re-run computes only missing cells. Each job prints one progress line.
+   measured alone (rows get `timing=alone`; stored rows timed beside other jobs are re-measured). Finished cells
+   come from the result store (`--store`), so a re-run computes only missing cells. Each job prints one progress
+   line.
 3. Prints Tables I-III and writes one HTML page, `<out>/report.html` (bench.report.html: every table with its spread
    across captures, a per-object view, the runtime plot, paper-style pictures for table3), and prints its path.
    Everything goes under `--out` (default outputs/demo): the sweep roots `<out>/table2|table3/` and Table I
