@@ -29,6 +29,7 @@ from hydra.types import HydraContext
 from omegaconf import DictConfig
 
 from bench.harness import stages
+from methods.domain.host import usable_cores
 
 
 @contextlib.contextmanager
@@ -76,8 +77,8 @@ class _ComposedOnce:
     def keep_all(self, master_config: DictConfig, batch: Sequence[Sequence[str]]) -> None:
         """`keep` for every job of the batch, composed by forked workers where there are several jobs and cores
         (module doc); one after another here where that is not possible or fails."""
-        workers = min(len(batch), _cores())
-        if workers > 1 and _cores() >= MIN_CORES and hasattr(os, "fork"):
+        workers = min(len(batch), usable_cores())
+        if workers > 1 and usable_cores() >= MIN_CORES and hasattr(os, "fork"):
             with stages.stage("composition"):
                 composed = _compose_in_workers(self._loader, master_config, [list(o) for o in batch], workers)
             if composed is not None:
@@ -102,10 +103,6 @@ class _ComposedOnce:
 
     def __setstate__(self, state):
         self.__dict__.update(state)
-
-
-def _cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 MIN_CORES = 4      # on 2 shared cores the workers made composition slower (table2 at load 4: 0.8 -> 1.0-1.1 s)

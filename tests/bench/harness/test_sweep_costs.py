@@ -290,7 +290,7 @@ class _FailingLoader(_Loader):
 def test_a_batch_is_composed_by_forked_workers_and_a_failure_is_composed_again_here(monkeypatch):
     from hydra_plugins.mm2fsk_bench import sweeper
 
-    monkeypatch.setattr(sweeper, "_cores", lambda: 4)
+    monkeypatch.setattr(sweeper, "usable_cores", lambda: 4)
     loader = _Loader()
     once = sweeper._ComposedOnce(loader)
     batch = [["freq=d05"], ["freq=d1"], ["freq=d2"], ["freq=d4"]]
