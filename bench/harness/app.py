@@ -35,7 +35,7 @@ from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
 from bench.harness.results import BackgroundWriter, ResultsCsv, write_depth
-from bench.harness.sizing import contended, machine_load, sweep_jobs, timing_mode
+from bench.harness.sizing import contended, machine_load, runs_jobs_here, sweep_jobs, timing_mode
 from bench.harness.store import Store, capture_files, code_version, copy_cell, write_arrays
 from bench.maroon import reader
 from bench.maroon.frames import parse_frame_spec, select_frames
@@ -565,15 +565,19 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
 
 
 def _next_job_here(hydra_cfg: DictConfig) -> bool:
-    """Whether the multirun's next job runs in this process after this one (the basic launcher): this job's last
-    output files may then be written while it starts (the merge callback waits for them)."""
-    return (hydra_cfg.mode == RunMode.MULTIRUN
-            and str(hydra_cfg.launcher.get("_target_", "")).endswith("BasicLauncher"))
+    """Whether the multirun's next job runs in this process after this one (the in-process and basic launchers):
+    this job's last output files may then be written while it starts (the merge callback waits for them)."""
+    return hydra_cfg.mode == RunMode.MULTIRUN and runs_jobs_here(hydra_cfg.launcher)
 
 
 def _isolate_warp_cache() -> None:
-    """Parallel jobs must not compile Warp kernels into one cache directory (DESIGN.md 8): one per process."""
-    if HydraConfig.get().mode == RunMode.MULTIRUN and "WARP_CACHE_PATH" not in os.environ:
+    """Parallel jobs must not compile Warp kernels into one cache directory (DESIGN.md 8): one per process for a
+    multirun whose jobs run in other processes (joblib, submitit). Jobs run in this process one after another (the
+    in-process and basic launchers) use Warp's own cache, as a single run does: kernels compiled by one sweep serve
+    the next (a folder per process id made every such sweep compile them anew: ~40 s for Table III on the H100)."""
+    hydra_cfg = HydraConfig.get()
+    if (hydra_cfg.mode == RunMode.MULTIRUN and not runs_jobs_here(hydra_cfg.launcher)
+            and "WARP_CACHE_PATH" not in os.environ):
         os.environ["WARP_CACHE_PATH"] = str(Path(tempfile.gettempdir()) / f"bench-warp-{os.getuid()}-{os.getpid()}")
 
 

@@ -182,13 +182,19 @@ def contended(load_1m: float, others_cores: float = float("nan")) -> bool:
     return load_1m > (os.cpu_count() or 1)
 
 
+def runs_jobs_here(launcher: DictConfig) -> bool:
+    """Whether a launcher (its Hydra config) runs a multirun's jobs one after another in the sweep's process:
+    Hydra's basic launcher and ours (hydra_plugins/mm2fsk_bench/inprocess.py)."""
+    return str(launcher.get("_target_", "")).endswith(("BasicLauncher", "InProcessLauncher"))
+
+
 def timing_mode(hydra_cfg: DictConfig) -> str:
     """'alone' or 'parallel' for the job whose Hydra config (HydraConfig.get()) this is (module docstring)."""
     if hydra_cfg.mode != RunMode.MULTIRUN or sweep_jobs() == 1:
         return "alone"
     launcher = hydra_cfg.launcher
     target = str(launcher.get("_target_", ""))
-    if target.endswith("BasicLauncher"):
+    if runs_jobs_here(launcher):
         return "alone"
     if target.endswith("JoblibLauncher"):
         n_jobs = int(launcher.n_jobs)                         # joblib: -1 = every core, -2 = all but one, ...
