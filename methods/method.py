@@ -29,6 +29,7 @@ from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
 from methods.domain.errors import UsageError
+from methods.domain.samples import FrameSamples
 from methods.ops.filtering import DEFAULT_THRESHOLD_DB
 from methods.ops.timing import StageTimer
 from methods.prior.image import Prior
@@ -49,12 +50,14 @@ class MethodError(UsageError):
 class Frame:
     """What a method reconstructs from: one radar frame at the configuration's frequencies, and where to look.
 
-    signal (n_rx, n_tx, F) complex, freqs_hz (F,) ascending as selected, antennas in radar space (m), grid the
-    pixel (and BP's voxel) grid, roi the region the capture allows (methods.skips.roi; the whole grid when the skips say
-    so), skips the computation shortcuts asked for (methods.skips.settings), threshold_db the depth filter (dB below the
-    strongest pixel's magnitude, None = off; methods.ops.filtering), name the capture's name (for messages)."""
+    samples the frame's samples at those frequencies (methods.domain.samples.FrameSamples; an array (n_rx, n_tx, F)
+    is wrapped) and `signal` the same as an array (n_rx, n_tx, F) complex, taken on first use; freqs_hz (F,)
+    ascending as selected, antennas in radar space (m), grid the pixel (and BP's voxel) grid, roi the region the
+    capture allows (methods.skips.roi; the whole grid when the skips say so), skips the computation shortcuts asked
+    for (methods.skips.settings), threshold_db the depth filter (dB below the strongest pixel's magnitude, None = off;
+    methods.ops.filtering), name the capture's name (for messages)."""
 
-    signal: np.ndarray
+    samples: FrameSamples
     freqs_hz: np.ndarray
     antennas: AntennaArray
     grid: RadarGrid
@@ -62,6 +65,15 @@ class Frame:
     skips: SkipSettings
     threshold_db: float | None = DEFAULT_THRESHOLD_DB
     name: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.samples, FrameSamples):
+            object.__setattr__(self, "samples", FrameSamples(self.samples))
+
+    @property
+    def signal(self) -> np.ndarray:
+        """The samples (n_rx, n_tx, F) as an array (a backend that stages them itself gathers from `samples`)."""
+        return self.samples.array()
 
 
 class Method:
