@@ -185,11 +185,12 @@ def test_cuda_checks_the_samples_it_uploads(tilted_plate, monkeypatch, device):
 
 
 @pytest.mark.parametrize("device", [CUDA])
-@pytest.mark.parametrize("method, config", [("mm2fsk", "d10"), ("mm3fsk", "d05_d10")])
-def test_cuda_frame_graphs_check_the_samples_they_gather(tilted_plate, monkeypatch, device, method, config):
-    """MM-2FSK's and MM-3FSK's frame graphs gather the used frequencies' samples from the frame and check them on the
-    device: the host neither takes nor checks them for a finite frame, and a NaN at a used frequency is refused with
-    the host's message."""
+@pytest.mark.parametrize("method, config, prior", [("mm2fsk", "d10", "realsense"), ("mm3fsk", "d05_d10", "realsense"),
+                                                   ("2fsk", "d05", "none"), ("3fsk", "d05_d10", "none")])
+def test_cuda_frame_graphs_check_the_samples_they_gather(tilted_plate, monkeypatch, device, method, config, prior):
+    """The frame graphs of MM-2FSK, MM-3FSK, 2FSK and 3FSK gather the used frequencies' samples from the frame and
+    check them on the device: the host neither takes nor checks them for a finite frame, and a NaN at a used
+    frequency is refused with the host's message."""
     from methods import api
     from methods.ops.frequencies import config_indices
 
@@ -197,13 +198,13 @@ def test_cuda_frame_graphs_check_the_samples_they_gather(tilted_plate, monkeypat
     monkeypatch.setattr(api, "_check_signal", lambda capture, signal: host_checks.append(1) or check_signal(
         capture, signal))
     grid = square_grid(0.003, 7, 0.29, 0.31, 11)
-    on_device = reconstruct(tilted_plate, method, config, prior="realsense", grid=grid, device=device)
+    on_device = reconstruct(tilted_plate, method, config, prior=prior, grid=grid, device=device)
     assert host_checks == [] and on_device.valid.any()
     signal = tilted_plate.radar.signal.copy()
     signal[3, 5, config_indices(tilted_plate.radar.freqs_hz, config)[-1]] = np.nan
     nan_frame = dataclasses.replace(tilted_plate, radar=dataclasses.replace(tilted_plate.radar, signal=signal))
     with pytest.raises(ValueError, match=f"^the radar frame of capture {tilted_plate.name} has NaN or Inf samples$"):
-        reconstruct(nan_frame, method, config, prior="realsense", grid=grid, device=device)
+        reconstruct(nan_frame, method, config, prior=prior, grid=grid, device=device)
 
 
 def test_any_valid_is_whether_some_depth_is_finite():

@@ -247,7 +247,7 @@ class WarpBackend(Backend):
                      timer, keep=None):
         freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
         if not self.device.is_cpu:                    # one CUDA graph per setting: stage 'correlate' holds it all
-            signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+            freqs_hz, tx_m, rx_m = staged_inputs(signal, freqs_hz, tx_m, rx_m)
             with timer.stage("correlate"):
                 maps, (z1_m, ref), *evaluated = fsk_graph(
                     self.buffers, grid, pixels, freqs_hz, [0, 1], False, tx_m, rx_m, prior_m,
@@ -262,7 +262,7 @@ class WarpBackend(Backend):
                   keep=None):
         freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
         if not self.device.is_cpu:
-            signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+            freqs_hz, tx_m, rx_m = staged_inputs(signal, freqs_hz, tx_m, rx_m)
             with timer.stage("correlate"):
                 maps, (z1_m, ref), *evaluated = fsk_graph(
                     self.buffers, grid, pixels, freqs_hz, list(coarse), True, tx_m, rx_m, prior_m,
@@ -270,6 +270,7 @@ class WarpBackend(Backend):
             return maps[0], maps[1], maps[2], {"reference_pixel": ref, "z1_m": z1_m, **_evaluated(evaluated)}
         if keep is not None:
             raise ValueError("the fsk_keep skip runs on the device only on CUDA (keeps_on_device)")
+        signal = np.asarray(signal)
         coarse_signal = np.ascontiguousarray(signal[:, :, coarse])
         return fsk.three_fsk(self.buffers, self._point_correlator(coarse_signal, freqs_hz[coarse], tx_m, rx_m),
                              self._point_correlator(signal, freqs_hz, tx_m, rx_m), grid, pixels, freqs_hz,

@@ -528,9 +528,9 @@ class FskGraph:
         self.first_shards.zero_()
         self.shards.zero_()
         self.ref.fill_(2147483647)
-        self.pair_correlator.enqueue_tables()
+        self.pair_correlator.enqueue_tables(check=not self.three)
         if self.three:
-            self.all_correlator.enqueue_tables()
+            self.all_correlator.enqueue_tables(check=True)
         wp.launch(fsk_kernels.points_at_depth, dim=n, inputs=[self.pixel, nx, self.x_m, self.y_m, self.prior_m,
                                                               self.points], device=dev)
         # pass 1 needs |c1| everywhere but c2 only at the strongest pixel: the first frequency over every point, then
@@ -564,14 +564,22 @@ class FskGraph:
         self.maps_back.enqueue()
         wp.copy(self.scalars_host, self.scalars)
 
-    def run(self, signal: np.ndarray) -> tuple[list[np.ndarray], tuple[float, int]]:
-        """Maps (depth, magnitude[, coarse depth]) and (z1_m, reference pixel) of a frame."""
+    def run(self, signal: np.ndarray | FrameSamples) -> tuple[list[np.ndarray], tuple[float, int]]:
+        """Maps (depth, magnitude[, coarse depth]) (lent: `HostMaps`) and (z1_m, reference pixel) of a frame's
+        samples (n_rx, n_tx, F) (a FrameSamples is gathered from its frame and marked `checked`); NaN or Inf samples
+        raise NonFiniteSignal."""
         out = self.maps_back.next_set()
-        self.pair_correlator.load(signal, None if self.pair == list(range(signal.shape[2])) else self.pair)
-        if self.three:
+        if self.three:                        # the pair from the three staged ones (not from the frame again)
             self.all_correlator.load(signal)
+            self.pair_correlator.load(self.all_correlator.raw_view, self.pair)
+        else:
+            self.pair_correlator.load(signal, None if self.pair == list(range(signal.shape[2])) else self.pair)
         out.launch()                          # the whole frame and the copies into `out`
         wp.synchronize_device(self.device)
+        if (self.all_correlator if self.three else self.pair_correlator).nonfinite_staged():
+            raise NonFiniteSignal("the radar frame has NaN or Inf samples")
+        if isinstance(signal, FrameSamples):
+            signal.checked = True
         z1_m, ref = self.scalars_host.numpy()
         return self.maps_back.take(out, self.shape), (float(z1_m), int(ref))
 
