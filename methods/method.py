@@ -38,6 +38,7 @@ from methods.skips.roi import Roi
 from methods.skips.settings import SkipSettings
 
 PRIOR_KINDS = ("none", "scalar", "realsense", "photogrammetry")
+_INTERFACE_CHECKED: set[type] = set()
 SENSOR_PRIORS = ("realsense", "photogrammetry")
 
 
@@ -90,7 +91,9 @@ class Method:
     uses_volume: ClassVar[bool] = False
 
     def __init__(self, **params):
-        check_interface(type(self))
+        if type(self) not in _INTERFACE_CHECKED:          # once per class (~10 us a call on the H100's host)
+            check_interface(type(self))
+            _INTERFACE_CHECKED.add(type(self))
         unknown = set(params) - set(self.params)
         if unknown:
             raise MethodError(f"unknown parameter(s) {', '.join(sorted(unknown))} for {self.name}; "

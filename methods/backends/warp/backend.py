@@ -297,7 +297,7 @@ def staged_inputs(samples, freqs_hz, tx_m, rx_m) -> tuple[np.ndarray, np.ndarray
     """`check_inputs`' checks and (freqs_hz, tx_m, rx_m) for samples a frame graph gathers into its own staging buffer
     (a FrameSamples is not taken into an array of its own: its shape is checked)."""
     if isinstance(samples, FrameSamples):
-        samples = np.broadcast_to(np.zeros((), dtype=samples.dtype), samples.shape)      # the shape, no memory
+        samples = np.empty(samples.shape, dtype=samples.dtype)     # its shape and type (memory never touched)
     return check_inputs(samples, freqs_hz, tx_m, rx_m)[1:]
 
 

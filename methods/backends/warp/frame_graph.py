@@ -18,6 +18,7 @@ Warp-CPU's default), which is how the tests compare this path with the step-by-s
 """
 from __future__ import annotations
 
+import sys
 import weakref
 
 import numpy as np
@@ -155,26 +156,13 @@ def _launch(graph, enqueue) -> None:
         enqueue()
 
 
-class _Lease:
-    """What the arrays lent from one set of host buffers share: alive while any of them, or a view of one, is."""
-
-    __slots__ = ("__weakref__",)
-
-
-class _Lent:
-    """A lent host buffer as the base of the numpy array the caller gets (`__array_interface__`): it holds the
-    lease and the buffer itself, so the memory outlives the graph that filled it."""
-
-    __slots__ = ("__array_interface__", "lease", "buffer")
-
-    def __init__(self, interface: dict, lease: _Lease, buffer: wp.array):
-        self.__array_interface__, self.lease, self.buffer = interface, lease, buffer
-
-
 class _HostSet:
     """One set of host buffers for a graph's maps (rows, n), and the launches that fill it: `compute` (the frame's
     launches that end in the maps) then the copies into the set, captured together as one CUDA graph (a launch of
-    its own for the copies cost more of the host's time than the copies)."""
+    its own for the copies cost more of the host's time than the copies). Its rows are lent as reshaped views of
+    one base array each: every array lent, and every view of one, refers to that base, so the set is free again
+    once no base has a reference beyond the set's own (`sys.getrefcount`; the base also keeps the memory alive
+    after the graph is dropped)."""
 
     def __init__(self, maps: wp.array, magnitude: wp.array, compute):
         dev = maps.device
@@ -182,6 +170,9 @@ class _HostSet:
         self.hosts = [wp.empty(n, dtype=wp.float32 if r == 1 else wp.float64, device="cpu", pinned=not dev.is_cpu)
                       for r in range(rows)]
         self.views = [h.numpy() for h in self.hosts]
+        if any(isinstance(v.base, np.ndarray) for v in self.views):     # views of views would skip to that base
+            raise RuntimeError("a host buffer's numpy view must be the base of the views made from it")
+        self._own = self._references()                               # the set's own
         sources = [magnitude if r == 1 else maps[r] for r in range(rows)]
 
         def enqueue():
@@ -190,25 +181,20 @@ class _HostSet:
                 wp.copy(host, source)
         self._enqueue = enqueue
         self.graph = _captured(dev, enqueue)
-        self.lease = None                   # weak reference to the lease of the arrays lent last
-        self._interfaces: dict = {}
+
+    def _references(self) -> list[int]:
+        return [sys.getrefcount(self.views[r]) for r in range(len(self.views))]
 
     @property
     def free(self) -> bool:
-        return self.lease is None or self.lease() is None
+        return self._references() == self._own
 
     def launch(self) -> None:
         _launch(self.graph, self._enqueue)
 
     def lend(self, shape) -> list[np.ndarray]:
-        """The buffers as arrays of `shape`, lent until none of them (or of their views) is alive."""
-        if shape not in self._interfaces:
-            self._interfaces[shape] = [dict(v.__array_interface__, shape=tuple(shape), strides=None)
-                                       for v in self.views]
-        lease = _Lease()
-        self.lease = weakref.ref(lease)
-        return [np.asarray(_Lent(interface, lease, host))
-                for interface, host in zip(self._interfaces[shape], self.hosts, strict=True)]
+        """The rows as arrays of `shape`, views of the set's buffers, lent until none of them is alive."""
+        return [v.reshape(shape) for v in self.views]
 
 
 class HostMaps:
@@ -216,9 +202,9 @@ class HostMaps:
     without a copy on the host (three copies out of one staging set cost ~0.14 ms of a 301 x 301 MM-2FSK frame on
     the H100's host): row 1, the magnitude, in float32 (exact: the kernels compute it in float32), the others in
     float64. A set of buffers is lent with a frame's arrays and reused only once none of them, nor a view of one, is
-    alive (a weak reference to their common lease): a result the caller keeps is never overwritten. While
-    LENT_SETS sets are lent, a frame's arrays are copies of a spare set's (as before). Each set launches the
-    frame's computing launches (`compute`, which ends with `enqueue`) and its copies as one graph."""
+    alive (`_HostSet.free`): a result the caller keeps is never overwritten. While LENT_SETS sets are lent, a
+    frame's arrays are copies of a spare set's (as before). Each set launches the frame's computing launches
+    (`compute`, which ends with `enqueue`) and its copies as one graph."""
 
     def __init__(self, maps: wp.array, compute):
         self.maps, self.compute = maps, compute
