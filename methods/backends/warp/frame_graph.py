@@ -136,7 +136,6 @@ class GraphCorrelator:
 
 
 SPLIT_PRIOR = True
-EARLY_PRIOR_COPY = True
 LENT_SETS = 3        # host buffer sets a graph lends out at a time (a caller keeping every result gets copies)
 
 
@@ -158,14 +157,14 @@ def _launch(graph, enqueue) -> None:
 
 
 class _HostSet:
-    """One set of host buffers for a graph's maps (rows, n), and the launches that fill it: per phase, its computing
-    launches then the copies of the rows that phase finishes, captured together as one CUDA graph (a launch of its
-    own for the copies cost more of the host's time than the copies). Its rows are lent as reshaped views of one
-    base array each: every array lent, and every view of one, refers to that base, so the set is free again once no
-    base has a reference beyond the set's own (`sys.getrefcount`; the base also keeps the memory alive after the
-    graph is dropped)."""
+    """One set of host buffers for a graph's maps (rows, n), and the launches that fill it: `compute` (the frame's
+    launches that end in the maps) then the copies into the set, captured together as one CUDA graph (a launch of
+    its own for the copies cost more of the host's time than the copies). Its rows are lent as reshaped views of
+    one base array each: every array lent, and every view of one, refers to that base, so the set is free again
+    once no base has a reference beyond the set's own (`sys.getrefcount`; the base also keeps the memory alive
+    after the graph is dropped)."""
 
-    def __init__(self, maps: wp.array, magnitude: wp.array, phases):
+    def __init__(self, maps: wp.array, magnitude: wp.array, compute):
         dev = maps.device
         rows, n = maps.shape
         self.hosts = [wp.empty(n, dtype=wp.float32 if r == 1 else wp.float64, device="cpu", pinned=not dev.is_cpu)
@@ -176,14 +175,12 @@ class _HostSet:
         self._own = self._references()                               # the set's own
         sources = [magnitude if r == 1 else maps[r] for r in range(rows)]
 
-        def phase(compute, copied):
-            def enqueue():
-                compute()
-                for r in copied:
-                    wp.copy(self.hosts[r], sources[r])
-            return enqueue
-        self._enqueues = [phase(compute, copied) for compute, copied in phases]
-        self.graphs = [_captured(dev, enqueue) for enqueue in self._enqueues]
+        def enqueue():
+            compute()
+            for host, source in zip(self.hosts, sources, strict=True):
+                wp.copy(host, source)
+        self._enqueue = enqueue
+        self.graph = _captured(dev, enqueue)
 
     def _references(self) -> list[int]:
         return [sys.getrefcount(self.views[r]) for r in range(len(self.views))]
@@ -192,9 +189,8 @@ class _HostSet:
     def free(self) -> bool:
         return self._references() == self._own
 
-    def launch(self, phase: int = -1) -> None:
-        """Launch a phase's computation and copies (the last phase by default)."""
-        _launch(self.graphs[phase], self._enqueues[phase])
+    def launch(self) -> None:
+        _launch(self.graph, self._enqueue)
 
     def lend(self, shape) -> list[np.ndarray]:
         """The rows as arrays of `shape`, views of the set's buffers, lent until none of them is alive."""
@@ -207,17 +203,17 @@ class HostMaps:
     the H100's host): row 1, the magnitude, in float32 (exact: the kernels compute it in float32), the others in
     float64. A set of buffers is lent with a frame's arrays and reused only once none of them, nor a view of one, is
     alive (`_HostSet.free`): a result the caller keeps is never overwritten. While LENT_SETS sets are lent, a
-    frame's arrays are copies of a spare set's (as before). `phases`: the frame's computing launches in order, each
-    with the rows it finishes (the last ends with `enqueue`), launched per set (`_HostSet.launch`)."""
+    frame's arrays are copies of a spare set's (as before). Each set launches the frame's computing launches
+    (`compute`, which ends with `enqueue`) and its copies as one graph."""
 
-    def __init__(self, maps: wp.array, phases):
-        self.maps, self.phases = maps, phases
+    def __init__(self, maps: wp.array, compute):
+        self.maps, self.compute = maps, compute
         self.magnitude = wp.empty(maps.shape[1], dtype=wp.float32, device=maps.device)
         self._sets: list[_HostSet] = []
         self._spare: _HostSet | None = None
 
     def enqueue(self) -> None:
-        """Launch the float32 conversion of the magnitude (the last of the computing launches)."""
+        """Launch the float32 conversion of the magnitude (the last of `compute`'s launches)."""
         wp.launch(fsk_kernels.magnitude_to_float32, dim=self.magnitude.shape[0], inputs=[self.maps, self.magnitude],
                   device=self.maps.device)
 
@@ -228,14 +224,14 @@ class HostMaps:
             if host_set.free:
                 return host_set
         if len(self._sets) < LENT_SETS:
-            self._sets.append(_HostSet(self.maps, self.magnitude, self.phases))
+            self._sets.append(_HostSet(self.maps, self.magnitude, self.compute))
             return self._sets[-1]
         if self._spare is None:
-            self._spare = _HostSet(self.maps, self.magnitude, self.phases)
+            self._spare = _HostSet(self.maps, self.magnitude, self.compute)
         return self._spare
 
     def take(self, host_set: _HostSet, shape) -> list[np.ndarray]:
-        """The rows of `host_set` (after the device finished its launches), each of `shape`: lent, or copies of the
+        """The rows of `host_set` (after the device finished its launch), each of `shape`: lent, or copies of the
         spare's."""
         if host_set is self._spare:
             return [v.reshape(shape).copy() for v in host_set.views]
@@ -315,11 +311,7 @@ class FrameGraph:
         self.points = wp.zeros(n_px, dtype=wp.vec3d, device=dev)          # unused slots: finite points
         self.pixel = wp.zeros(n_px, dtype=wp.int32, device=dev)
         self.maps = wp.empty((3, n_px), dtype=wp.float64, device=dev)
-        if EARLY_PRIOR_COPY:      # the prior's row copied back in the prior's phase (while the host gathers)
-            phases = [(self._enqueue_prior, [2]), (self._enqueue_frame, [0, 1])]
-        else:
-            phases = [(self._enqueue_frame, [0, 1, 2])] if SPLIT_PRIOR else [(self._enqueue_whole, [0, 1, 2])]
-        self.maps_back = HostMaps(self.maps, phases)
+        self.maps_back = HostMaps(self.maps, self._enqueue_frame if SPLIT_PRIOR else self._enqueue_whole)
         self.coarse = None if coarse is None else list(coarse)
         pair_hz = freqs_hz if coarse is None else freqs_hz[self.coarse]
         self.correlator = GraphCorrelator(dev, n_px, pair_hz, tx_m, rx_m)
@@ -348,7 +340,7 @@ class FrameGraph:
         self._roi_from = (None, False)      # (weak reference to the read-only mask staged, whether all ones are)
         # the samples' correlator whose staged samples are checked for NaN/Inf (MM-3FSK's fine one holds all three)
         self.checked = self.correlator if coarse is None else self.fine_correlator
-        self.prior_graph = _captured(dev, self._enqueue_prior) if SPLIT_PRIOR and not EARLY_PRIOR_COPY else None
+        self.prior_graph = _captured(dev, self._enqueue_prior) if SPLIT_PRIOR else None
 
     def _roi_staged(self, roi_pixels: np.ndarray | None) -> bool:
         """Whether roi_host already holds this ROI: all ones, or this very read-only mask (the API's cached ROI, the
@@ -439,9 +431,7 @@ class FrameGraph:
         if self.use_mask:                                       # a bool mask's bytes are the 0/1 staged: a memcpy
             mask = depth.mask
             np.copyto(self.mask_view, mask.view(np.uint8) if mask.dtype == np.bool_ else mask, casting="unsafe")
-        if EARLY_PRIOR_COPY:
-            out.launch(0)
-        elif SPLIT_PRIOR:
+        if SPLIT_PRIOR:
             _launch(self.prior_graph, self._enqueue_prior)
         if self.coarse is None:
             self.correlator.load(signal)
@@ -497,7 +487,7 @@ class FskGraph:
         self.pixel = wp.array(flat_pixels.astype(np.int32), dtype=wp.int32, device=dev)
         self.points = wp.zeros(n, dtype=wp.vec3d, device=dev)
         self.maps = wp.empty((rows, ny * nx), dtype=wp.float64, device=dev)
-        self.maps_back = HostMaps(self.maps, [(self._enqueue, list(range(rows)))])
+        self.maps_back = HostMaps(self.maps, self._enqueue)
         self.scalars = wp.empty(2, dtype=wp.float64, device=dev)
         self.scalars_host = wp.empty(2, dtype=wp.float64, device="cpu", pinned=pinned)
         self.first_peak = wp.empty(1, dtype=wp.float32, device=dev)
