@@ -1,20 +1,24 @@
-"""A whole MM-2FSK (or MM-3FSK) new frame as one CUDA graph: the RealSense prior (camera quads, the scanline hole
-fill), the correlation at the prior (tables built from the raw samples, tensor cores), depth and filter, and the
-copies in and out, replayed per frame with one launch and one synchronisation (`FrameGraph.run`).
+"""A whole MM-2FSK (or MM-3FSK) new frame as two CUDA graphs: the RealSense prior (camera quads, the scanline hole
+fill), then the correlation at the prior (tables built from the raw samples, tensor cores), depth and filter, and the
+copies in and out, replayed per frame with two launches and one synchronisation (`FrameGraph.run`); the host
+gathers the frame's samples while the device builds the prior (one graph cost 0.69-0.78 ms a 301 x 301 call on the
+H100, against 0.56 ms with the prior launched first: formation.md section 13).
 
 The launches are those of the step-by-step device path (`warp_backend.prior.realsense_prior` with fill
 'scanline', then `warp_backend.fsk.depth_at_prior`), on buffers allocated once per setting (depth image size,
 grid, camera, transform, frequencies, antennas, filter threshold: `graph_key`) so that their addresses stay
 fixed, and with launch sizes that do not depend on the frame: the covered pixels are compacted into slots as
 before and every later kernel runs over all ny * nx slots, threads (and the correlation's blocks) past the count
-returning at once, so the count never goes to the host before the end. A new frame's samples,
-depth image and mask are copied into pinned staging buffers on the host; the graph's first nodes copy them to the
-device. With a coarse pair (MM-3FSK, `methods.mm3fsk`) the correlation at the prior is the coarse pair's; the
-median of its corrections over the pixels the filter keeps (`MedianOffset`: a radix select on the corrections
-quantised to 2^32 steps over +-3.2 rad, within 3e-11 m of np.median's for d05_d10's pair) moves every point, the
-three frequencies are correlated there and the slope gives the depth, still one launch and one copy back.
-Warp-CPU has no graphs: there `run` issues the same launches (the correlation with the separable kernel,
-Warp-CPU's default), which is how the tests compare this path with the step-by-step one without a GPU.
+returning at once, so the count never goes to the host before the end. A new frame's depth image and mask are
+copied into pinned staging buffers on the host, its samples gathered into one (straight from the frame:
+`methods.domain.samples.FrameSamples`) and checked for NaN/Inf on the device; the graphs' first nodes copy them to
+the device, and the maps come back into pinned buffers lent to the caller (`HostMaps`). With a coarse pair
+(MM-3FSK, `methods.mm3fsk`) the correlation at the prior is the coarse pair's; the median of its corrections over
+the pixels the filter keeps (`MedianOffset`: a radix select on the corrections quantised to 2^32 steps over +-3.2
+rad, within 3e-11 m of np.median's for d05_d10's pair) moves every point, the three frequencies are correlated
+there and the slope gives the depth, still one copy back. Warp-CPU has no graphs: there `run` issues the same
+launches (the correlation with the separable kernel, Warp-CPU's default), which is how the tests compare this path
+with the step-by-step one without a GPU.
 """
 from __future__ import annotations
 
@@ -135,7 +139,6 @@ class GraphCorrelator:
         return self.out
 
 
-SPLIT_PRIOR = True
 LENT_SETS = 3        # host buffer sets a graph lends out at a time (a caller keeping every result gets copies)
 
 
@@ -311,7 +314,7 @@ class FrameGraph:
         self.points = wp.zeros(n_px, dtype=wp.vec3d, device=dev)          # unused slots: finite points
         self.pixel = wp.zeros(n_px, dtype=wp.int32, device=dev)
         self.maps = wp.empty((3, n_px), dtype=wp.float64, device=dev)
-        self.maps_back = HostMaps(self.maps, self._enqueue_frame if SPLIT_PRIOR else self._enqueue_whole)
+        self.maps_back = HostMaps(self.maps, self._enqueue_frame)
         self.coarse = None if coarse is None else list(coarse)
         pair_hz = freqs_hz if coarse is None else freqs_hz[self.coarse]
         self.correlator = GraphCorrelator(dev, n_px, pair_hz, tx_m, rx_m)
@@ -340,17 +343,13 @@ class FrameGraph:
         self._roi_from = (None, False)      # (weak reference to the read-only mask staged, whether all ones are)
         # the samples' correlator whose staged samples are checked for NaN/Inf (MM-3FSK's fine one holds all three)
         self.checked = self.correlator if coarse is None else self.fine_correlator
-        self.prior_graph = _captured(dev, self._enqueue_prior) if SPLIT_PRIOR else None
+        self.prior_graph = _captured(dev, self._enqueue_prior)
 
     def _roi_staged(self, roi_pixels: np.ndarray | None) -> bool:
         """Whether roi_host already holds this ROI: all ones, or this very read-only mask (the API's cached ROI, the
         same array on every frame of a setting)."""
         ref, all_ones = self._roi_from
         return all_ones if roi_pixels is None else (ref is not None and ref() is roi_pixels)
-
-    def _enqueue_whole(self) -> None:
-        self._enqueue_prior()
-        self._enqueue_frame()
 
     def _enqueue_prior(self) -> None:
         """A frame's prior, in stream order (captured once on CUDA; issued per frame on Warp-CPU): the depth image,
@@ -431,8 +430,7 @@ class FrameGraph:
         if self.use_mask:                                       # a bool mask's bytes are the 0/1 staged: a memcpy
             mask = depth.mask
             np.copyto(self.mask_view, mask.view(np.uint8) if mask.dtype == np.bool_ else mask, casting="unsafe")
-        if SPLIT_PRIOR:
-            _launch(self.prior_graph, self._enqueue_prior)
+        _launch(self.prior_graph, self._enqueue_prior)         # the prior runs while the host gathers the samples
         if self.coarse is None:
             self.correlator.load(signal)
         else:                                 # the pair from the three staged ones (not from the frame again)
