@@ -20,7 +20,8 @@ class FrameSamples:
             raise ValueError(f"a radar frame's samples are (n_rx, n_tx, F), got shape {frame.shape}")
         if indices is not None:
             indices = np.asarray(indices, dtype=np.intp)
-            if indices.ndim != 1 or (indices.size and (indices.min() < 0 or indices.max() >= frame.shape[2])):
+            listed = indices.tolist()               # (a few: Python's min/max beat two NumPy reductions)
+            if indices.ndim != 1 or (listed and (min(listed) < 0 or max(listed) >= frame.shape[2])):
                 raise ValueError(f"frequency indices {indices} do not select among the frame's {frame.shape[2]}")
         self.frame, self.indices = frame, indices
         self.shape = frame.shape[:2] + (frame.shape[2] if indices is None else len(indices),)
