@@ -503,7 +503,6 @@ class FskGraph:
         self.centred = wp.vec3d(*(centred_hz / (centred_hz @ centred_hz))) if three else None
         self.prior_m, self.keep_ratio, self.first_only = float(prior_m), float(keep_ratio), int(first_only)
 
-
     def _first_pass(self) -> None:
         """Clear the outputs, build the tables, pass 1 at the scalar prior and the common guess z1 (scalars; every
         point moved there)."""
