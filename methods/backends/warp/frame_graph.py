@@ -106,10 +106,7 @@ class GraphCorrelator:
             wp.copy(self.nonfinite_host, self.nonfinite)
         if dev.is_cpu:
             return
-        self.gain_raw.zero_()
-        table_kernels.launch_signal_gain(self.raw, self.scale, self.gain_raw, dev)
-        wp.launch(table_kernels.tx_half_table, dim=self.mat_h.shape,
-                  inputs=[self.raw, self.scale, self.gain_raw, self.gain, self.mat_h], device=dev)
+        table_kernels.launch_tables(self.raw, self.scale, self.gain_raw, self.gain, self.mat_h, dev)
 
     def nonfinite_staged(self) -> bool:
         """Whether the last run's samples held NaN or Inf (after the device finished a run that checked them)."""
