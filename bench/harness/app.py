@@ -29,21 +29,13 @@ from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
 from bench.cachedir import default_cache_dir
-from bench.harness import CONFIG_DIR, captures, stages, validate, workers
+from bench.harness import CONFIG_DIR, captures, sizing, stages, validate, workers
 from bench.harness import results as outputs
 from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
 from bench.harness.results import BackgroundWriter, ResultsCsv, write_depth
-from bench.harness.sizing import (
-    busy_cpu_s,
-    contended,
-    descendants,
-    machine_load,
-    processes_cpu_s,
-    sweep_jobs,
-    timing_mode,
-)
+from bench.harness.sizing import contended, machine_load, sweep_jobs, timing_mode
 from bench.harness.store import Store, capture_files, code_version, copy_cell, write_arrays
 from bench.maroon import reader
 from bench.maroon.frames import parse_frame_spec, select_frames
@@ -256,9 +248,8 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
                              scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
                              threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
     load_1m = machine_load()
-    helpers = descendants()
-    busy_s, cpu_s, wall_s = busy_cpu_s(), time.process_time(), time.perf_counter()
-    helpers_s = processes_cpu_s(helpers)
+    start = sizing.CLOCK.sample()
+    cpu_s, wall_s = time.process_time(), time.perf_counter()
     with stages.stage("methods"):
         rec = call()
     columns = {"load_1m": load_1m, "cpu_ms": 1e3 * (time.process_time() - cpu_s),
@@ -268,13 +259,9 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
     while len(runtimes_ms) < int(cfg.timing.repeat) and sum(runtimes_ms) + runtimes_ms[0] <= budget_ms:
         with stages.stage("methods"):
             runtimes_ms.append(call().timings_ms["total"])
-    # what the rest of the machine used over the timed calls, in cores (/proc/stat counts clock ticks of 10 ms:
-    # over windows under 20 ms it says nothing); the job's own child processes (its output writer, the fork server
-    # that starts it) are its own, as its writer thread was
-    own_s = time.process_time() - cpu_s + processes_cpu_s(helpers) - helpers_s
-    window_s = time.perf_counter() - wall_s
-    columns["others_cores"] = (max(0.0, busy_cpu_s() - busy_s - own_s) / window_s if window_s >= 0.02
-                               else float("nan"))
+    # what the rest of the machine used over the timed calls, in cores (over a short call's last 0.2 s or more:
+    # bench.harness.sizing.CpuClock)
+    columns["others_cores"] = sizing.CLOCK.others_cores(start, sizing.CLOCK.sample())
     return rec, {"runtime_ms": statistics.median(runtimes_ms), "runtime_runs": len(runtimes_ms), **columns}
 
 
@@ -565,7 +552,7 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
     capture = read(_method_parts(cfg.prior.name))
     with stages.stage("ground truth"):
         key = None if kept is None else captures.kept_key(kept, capture_dir, frame, empty_filtered,
-                                                          capture.radar.grid)
+                                                          capture.radar.grid, antenna_files)
         gt = captures.ground_truth(capture_dir, capture, lambda: read((*_method_parts(cfg.prior.name), "mesh")),
                                    kept, key)
     grid = capture.radar.grid
