@@ -4,9 +4,10 @@ DIR]]`:
 1. Generates the embedded synthetic dataset (`--root`, default data/synthetic) in this process, one line per
    capture, before any sweep starts (cached: a re-run finds every capture up to date in milliseconds).
 2. Runs the paper's experiments `table2` and `table3` as Hydra multiruns, exactly as `python -m bench -m
-   experiment=NAME hydra/launcher=basic` would: one job at a time, so every runtime in the tables is measured
-   alone (rows get `timing=alone`; stored rows timed beside other jobs are re-measured). Finished cells come from
-   the result store (`--store`), so a re-run computes only missing cells. Each job prints one progress line.
+   experiment=NAME` would (the default launcher, inprocess): one job at a time, so every runtime in the tables is
+   measured alone (rows get `timing=alone`; stored rows timed beside other jobs are re-measured). Finished cells
+   come from the result store (`--store`), so a re-run computes only missing cells. Each job prints one progress
+   line.
 3. Prints Tables I-III and writes one HTML page, `<out>/report.html` (bench.report.html: every table with its spread
    across captures, a per-object view, the runtime plot, paper-style pictures for table3), and prints its path.
    Everything goes under `--out` (default outputs/demo): the sweep roots `<out>/table2|table3/` and Table I
@@ -43,7 +44,7 @@ TIMING = ("timing.repeat=3", "timing.budget_s=1.2")
 REPORT_FILES = ("{table}.md", "{table}.csv", "{table}_pairs.csv", "{table}.tex", "runtime_vs_error.png")
 # One job at a time: runtimes measured alone (docs/measurements/performance.md "The demo's cost"
 # has the measured cost of this choice).
-LAUNCHER = "basic"
+LAUNCHER = "inprocess"
 QUIET = ("+hydra.job_logging.handlers.console.level=WARNING",   # per-capture lines stay in each job's app.log
          "hydra.hydra_logging.root.level=WARNING")             # no launcher chatter: the jobs print progress
 

@@ -28,6 +28,7 @@ from methods.backends import backend_for
 from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
+from methods.domain.samples import FrameSamples
 from methods.method import Frame, Method
 from methods.ops.correlate import C_M_PER_S
 from methods.ops.filtering import DEFAULT_THRESHOLD_DB, filter_depth
@@ -142,12 +143,14 @@ def device_result(depth_m: np.ndarray, magnitude: np.ndarray, grid: RadarGrid, f
                           timings_ms=timer.finish(), grid=grid, method=method, extra=extra)
 
 
-def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
+def reconstruct_2fsk(signal: np.ndarray | FrameSamples, freqs_hz: np.ndarray, antennas: AntennaArray,
+                     grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
                      backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE,
                      timer: StageTimer | None = None, filter_quantity: str = "mean") -> Reconstruction:
-    """2FSK depth map on `grid`'s pixels from a two-frequency frame `signal` (n_rx, n_tx, 2); `roi` (None = the
-    whole grid) and `skips.fsk_keep` as in the module doc; `filter_quantity` as in `filter_magnitude`."""
+    """2FSK depth map on `grid`'s pixels from a two-frequency frame `signal` (n_rx, n_tx, 2) (or a FrameSamples,
+    which a device graph gathers itself); `roi` (None = the whole grid) and `skips.fsk_keep` as in the module doc;
+    `filter_quantity` as in `filter_magnitude`."""
     if len(freqs_hz) != 2:
         raise ValueError(f"2FSK needs exactly two frequencies, got {len(freqs_hz)}")
     timer = timer or StageTimer()
@@ -168,6 +171,7 @@ def reconstruct_2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
             evaluated = int(np.count_nonzero(pixels))
         extra = {"prior_m": prior_m, **details, "roi_px": evaluated, "roi_sources": roi.sources}
         return device_result(depth_m, magnitude, grid, freqs_hz, "2fsk", timer, extra, roi)
+    signal = np.asarray(signal)
     x_img, y_img = grid.pixel_xy_m()
     z1_m, details = first_pass_z1_m(signal, freqs_hz, antennas, x_img[pixels], y_img[pixels], prior_m, backend,
                                     timer)
@@ -194,6 +198,6 @@ class TwoFSK(Method):
     params = {"filter_quantity": "mean"}     # 'first': the reference code's filter (profile=faithful)
 
     def run(self, frame: Frame, prior: float, backend: Backend, timer: StageTimer) -> Reconstruction:
-        return reconstruct_2fsk(frame.signal, frame.freqs_hz, frame.antennas, frame.grid, prior_m=prior,
+        return reconstruct_2fsk(frame.samples, frame.freqs_hz, frame.antennas, frame.grid, prior_m=prior,
                                 threshold_db=frame.threshold_db, backend=backend, roi=frame.roi, skips=frame.skips,
                                 timer=timer, filter_quantity=self.values["filter_quantity"])

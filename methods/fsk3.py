@@ -36,6 +36,7 @@ from methods.backends import backend_for
 from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
+from methods.domain.samples import FrameSamples
 from methods.fsk import (
     DEFAULT_PRIOR_M,
     correlate_pixels,
@@ -68,12 +69,14 @@ def slope_correction_m(phasors: np.ndarray, freqs_hz: np.ndarray) -> np.ndarray:
     return C_M_PER_S * slope / (4.0 * np.pi)
 
 
-def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid, *,
+def reconstruct_3fsk(signal: np.ndarray | FrameSamples, freqs_hz: np.ndarray, antennas: AntennaArray,
+                     grid: RadarGrid, *,
                      prior_m: float = DEFAULT_PRIOR_M, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
                      backend: Backend | str = "cpu", roi: Roi | None = None, skips: SkipSettings = NONE,
                      timer: StageTimer | None = None) -> Reconstruction:
-    """3FSK depth map on `grid`'s pixels from a three-frequency frame `signal` (n_rx, n_tx, 3), f ascending;
-    `roi` (None = the whole grid) and `skips.fsk_keep` as in the module doc."""
+    """3FSK depth map on `grid`'s pixels from a three-frequency frame `signal` (n_rx, n_tx, 3), f ascending (or a
+    FrameSamples, which a device graph gathers itself); `roi` (None = the whole grid) and `skips.fsk_keep` as in
+    the module doc."""
     freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
     if len(freqs_hz) != 3 or not np.all(np.diff(freqs_hz) > 0):
         raise ValueError(f"3FSK needs three ascending frequencies, got {freqs_hz}")
@@ -98,6 +101,7 @@ def reconstruct_3fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Antenna
             evaluated = int(np.count_nonzero(pixels))
         extra.update(coarse_depth_m=coarse_m, **details, roi_px=evaluated, roi_sources=roi.sources)
         return device_result(depth_m, magnitude, grid, freqs_hz, "3fsk", timer, extra, roi)
+    signal = np.asarray(signal)
     x_img, y_img = grid.pixel_xy_m()
     coarse_signal, coarse_hz = signal[:, :, coarse], freqs_hz[coarse]
     z1_m, details = first_pass_z1_m(coarse_signal, coarse_hz, antennas, x_img[pixels], y_img[pixels], prior_m,
@@ -129,6 +133,6 @@ class ThreeFSK(Method):
     priors = ("scalar",)
 
     def run(self, frame: Frame, prior: float, backend: Backend, timer: StageTimer) -> Reconstruction:
-        return reconstruct_3fsk(frame.signal, frame.freqs_hz, frame.antennas, frame.grid, prior_m=prior,
+        return reconstruct_3fsk(frame.samples, frame.freqs_hz, frame.antennas, frame.grid, prior_m=prior,
                                 threshold_db=frame.threshold_db, backend=backend, roi=frame.roi, skips=frame.skips,
                                 timer=timer)

@@ -29,6 +29,7 @@ from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
 from methods.domain.errors import UsageError
+from methods.domain.samples import FrameSamples
 from methods.ops.filtering import DEFAULT_THRESHOLD_DB
 from methods.ops.timing import StageTimer
 from methods.prior.image import Prior
@@ -37,6 +38,7 @@ from methods.skips.roi import Roi
 from methods.skips.settings import SkipSettings
 
 PRIOR_KINDS = ("none", "scalar", "realsense", "photogrammetry")
+_INTERFACE_CHECKED: set[type] = set()
 SENSOR_PRIORS = ("realsense", "photogrammetry")
 
 
@@ -49,12 +51,14 @@ class MethodError(UsageError):
 class Frame:
     """What a method reconstructs from: one radar frame at the configuration's frequencies, and where to look.
 
-    signal (n_rx, n_tx, F) complex, freqs_hz (F,) ascending as selected, antennas in radar space (m), grid the
-    pixel (and BP's voxel) grid, roi the region the capture allows (methods.skips.roi; the whole grid when the skips say
-    so), skips the computation shortcuts asked for (methods.skips.settings), threshold_db the depth filter (dB below the
-    strongest pixel's magnitude, None = off; methods.ops.filtering), name the capture's name (for messages)."""
+    samples the frame's samples at those frequencies (methods.domain.samples.FrameSamples; an array (n_rx, n_tx, F)
+    is wrapped) and `signal` the same as an array (n_rx, n_tx, F) complex, taken on first use; freqs_hz (F,)
+    ascending as selected, antennas in radar space (m), grid the pixel (and BP's voxel) grid, roi the region the
+    capture allows (methods.skips.roi; the whole grid when the skips say so), skips the computation shortcuts asked
+    for (methods.skips.settings), threshold_db the depth filter (dB below the strongest pixel's magnitude, None = off;
+    methods.ops.filtering), name the capture's name (for messages)."""
 
-    signal: np.ndarray
+    samples: FrameSamples
     freqs_hz: np.ndarray
     antennas: AntennaArray
     grid: RadarGrid
@@ -62,6 +66,15 @@ class Frame:
     skips: SkipSettings
     threshold_db: float | None = DEFAULT_THRESHOLD_DB
     name: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.samples, FrameSamples):
+            object.__setattr__(self, "samples", FrameSamples(self.samples))
+
+    @property
+    def signal(self) -> np.ndarray:
+        """The samples (n_rx, n_tx, F) as an array (a backend that stages them itself gathers from `samples`)."""
+        return self.samples.array()
 
 
 class Method:
@@ -78,7 +91,9 @@ class Method:
     uses_volume: ClassVar[bool] = False
 
     def __init__(self, **params):
-        check_interface(type(self))
+        if type(self) not in _INTERFACE_CHECKED:          # once per class (~10 us a call on the H100's host)
+            check_interface(type(self))
+            _INTERFACE_CHECKED.add(type(self))
         unknown = set(params) - set(self.params)
         if unknown:
             raise MethodError(f"unknown parameter(s) {', '.join(sorted(unknown))} for {self.name}; "

@@ -17,6 +17,7 @@ from methods.backends import backend_for
 from methods.backends.base import Backend
 from methods.domain.antennas import AntennaArray
 from methods.domain.capture import RadarGrid
+from methods.domain.samples import FrameSamples
 from methods.fsk import FILTER_QUANTITIES, correlate_pixels, depth_correction_m, filter_magnitude, roi_depth_m
 from methods.method import Frame, Method
 from methods.ops.filtering import DEFAULT_THRESHOLD_DB, filter_depth
@@ -26,12 +27,13 @@ from methods.reconstruction import Reconstruction
 from methods.skips.roi import Roi
 
 
-def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid,
+def reconstruct_mm2fsk(signal: np.ndarray | FrameSamples, freqs_hz: np.ndarray, antennas: AntennaArray, grid: RadarGrid,
                        prior: Prior | np.ndarray, *, threshold_db: float | None = DEFAULT_THRESHOLD_DB,
                        backend: Backend | str = "cpu", timer: StageTimer | None = None, roi: Roi | None = None,
                        filter_quantity: str = "mean") -> Reconstruction:
     """MM-2FSK depth map (ny, nx) from a two-frequency `signal` (n_rx, n_tx, 2) and a prior (ny, nx) on `grid`
-    (a `Prior` or an image in metres, NaN = no prior), metres.
+    (a `Prior` or an image in metres, NaN = no prior), metres. `signal` may be a FrameSamples (a frame's samples at
+    the two frequencies), which the device's frame graph gathers itself.
 
     Pass the `timer` that already timed the prior so that `total` includes it. `roi` (None = the whole grid)
     bounds the pixels correlated and the depths kept. A device-resident prior stays on its backend's device unless
@@ -48,11 +50,11 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
     if prior.shape != grid.image_shape:
         raise ValueError(f"prior shape {prior.shape} does not match the radar image {grid.image_shape}")
     backend = backend_for(backend)
-    if roi is not None and roi.pixels.all() and np.isinf(roi.z_min_m) and np.isinf(roi.z_max_m):
+    roi_cut = roi is not None and not roi.pixels.all()
+    if roi is not None and not roi_cut and np.isinf(roi.z_min_m) and np.isinf(roi.z_max_m):
         roi = None                                   # the whole grid: nothing to restrict
     timer = timer or StageTimer()
     sources = (() if roi is None else roi.sources) + ("prior",)
-    roi_cut = roi is not None and not roi.pixels.all()
     if prior.device_resident and (not roi_cut or prior.takes_roi) and filter_quantity == "mean":
         depth_m, magnitude, prior_m = backend.depth_at_prior(signal, freqs_hz, antennas.tx_m, antennas.rx_m, grid,
                                                              prior, threshold_db, timer,
@@ -64,6 +66,7 @@ def reconstruct_mm2fsk(signal: np.ndarray, freqs_hz: np.ndarray, antennas: Anten
                               timings_ms=timer.finish(), grid=grid, method="mm2fsk",
                               extra={"prior_depth_m": prior_m, "prior_pixels": used, "roi_px": used,
                                      "roi_sources": sources})
+    signal = np.asarray(signal)
     prior_depth_m = prior.host_m()
     has_prior = np.isfinite(prior_depth_m) if roi is None else np.isfinite(prior_depth_m) & roi.pixels
     x_m, y_m = grid.pixel_xy_m()
@@ -96,6 +99,6 @@ class MM2FSK(Method):
     params = {"filter_quantity": "mean"}     # 'first': the reference code's filter (profile=faithful)
 
     def run(self, frame: Frame, prior: Prior, backend: Backend, timer: StageTimer) -> Reconstruction:
-        return reconstruct_mm2fsk(frame.signal, frame.freqs_hz, frame.antennas, frame.grid, prior,
+        return reconstruct_mm2fsk(frame.samples, frame.freqs_hz, frame.antennas, frame.grid, prior,
                                   threshold_db=frame.threshold_db, backend=backend, timer=timer, roi=frame.roi,
                                   filter_quantity=self.values["filter_quantity"])

@@ -82,7 +82,7 @@ class MM3FSK(Method):
         grid, roi = frame.grid, frame.roi
         on_device = None
         if prior.device_resident:                  # a RealSense prior not built yet: one frame graph (Warp)
-            on_device = backend.mm3fsk_at_prior(frame.signal, freqs_hz, frame.antennas.tx_m, frame.antennas.rx_m,
+            on_device = backend.mm3fsk_at_prior(frame.samples, freqs_hz, frame.antennas.tx_m, frame.antennas.rx_m,
                                                 grid, prior, coarse_pair(freqs_hz), frame.threshold_db, timer,
                                                 None if roi.pixels.all() else roi.pixels)
         if on_device is not None:

@@ -5,28 +5,23 @@ reconstruction. Build the ground-truth tree once per capture (`PointSet`) and re
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from methods.domain.host import usable_cores
+
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
 
-#: threads of a nearest-neighbour query; None: one per core the process may run on (`usable_cores`) where it scores
+#: threads of a nearest-neighbour query; None: one per core the process may run on (`usable_cores`; not SciPy's
+#: `workers=-1`, which is every core of the host) where it scores
 #: alone; scoring worker processes set 1 (bench.harness.workers), so that a pool of them does not start a thread
 #: per core each beside the timed calls
 QUERY_THREADS: int | None = None
 LEAF_POINTS = 64
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity). Not SciPy's `workers=-1`, which is `os.cpu_count()`:
-    the host's every core, e.g. the whole machine under a container limited to a few of them, where each query
-    then started (and waited for) a thread per host core."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 @dataclass

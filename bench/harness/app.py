@@ -29,21 +29,13 @@ from omegaconf import DictConfig, MissingMandatoryValue, OmegaConf
 
 from bench import cli
 from bench.cachedir import default_cache_dir
-from bench.harness import CONFIG_DIR, captures, stages, validate, workers
+from bench.harness import CONFIG_DIR, captures, sizing, stages, validate, workers
 from bench.harness import results as outputs
 from bench.harness.durations import Durations, configuration_id
 from bench.harness.grids import grid_for
 from bench.harness.identity import params_string
 from bench.harness.results import BackgroundWriter, ResultsCsv, write_depth
-from bench.harness.sizing import (
-    busy_cpu_s,
-    contended,
-    descendants,
-    machine_load,
-    processes_cpu_s,
-    sweep_jobs,
-    timing_mode,
-)
+from bench.harness.sizing import contended, machine_load, runs_jobs_here, sweep_jobs, timing_mode
 from bench.harness.store import Store, capture_files, code_version, copy_cell, write_arrays
 from bench.maroon import reader
 from bench.maroon.frames import parse_frame_spec, select_frames
@@ -256,9 +248,8 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
                              scalar_prior_m=float(cfg.prior.scalar_m), device=device, grid=grid, roi=_roi(cfg),
                              threshold_db=float(cfg.threshold_db), prior_options=_prior_options(cfg))
     load_1m = machine_load()
-    helpers = descendants()
-    busy_s, cpu_s, wall_s = busy_cpu_s(), time.process_time(), time.perf_counter()
-    helpers_s = processes_cpu_s(helpers)
+    start = sizing.CLOCK.sample()
+    cpu_s, wall_s = time.process_time(), time.perf_counter()
     with stages.stage("methods"):
         rec = call()
     columns = {"load_1m": load_1m, "cpu_ms": 1e3 * (time.process_time() - cpu_s),
@@ -268,13 +259,9 @@ def _reconstruct(cfg: DictConfig, method, capture: Capture, grid: RadarGrid, dev
     while len(runtimes_ms) < int(cfg.timing.repeat) and sum(runtimes_ms) + runtimes_ms[0] <= budget_ms:
         with stages.stage("methods"):
             runtimes_ms.append(call().timings_ms["total"])
-    # what the rest of the machine used over the timed calls, in cores (/proc/stat counts clock ticks of 10 ms:
-    # over windows under 20 ms it says nothing); the job's own child processes (its output writer, the fork server
-    # that starts it) are its own, as its writer thread was
-    own_s = time.process_time() - cpu_s + processes_cpu_s(helpers) - helpers_s
-    window_s = time.perf_counter() - wall_s
-    columns["others_cores"] = (max(0.0, busy_cpu_s() - busy_s - own_s) / window_s if window_s >= 0.02
-                               else float("nan"))
+    # what the rest of the machine used over the timed calls, in cores (over a short call's last 0.2 s or more:
+    # bench.harness.sizing.CpuClock)
+    columns["others_cores"] = sizing.CLOCK.others_cores(start, sizing.CLOCK.sample())
     return rec, {"runtime_ms": statistics.median(runtimes_ms), "runtime_runs": len(runtimes_ms), **columns}
 
 
@@ -565,7 +552,7 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
     capture = read(_method_parts(cfg.prior.name))
     with stages.stage("ground truth"):
         key = None if kept is None else captures.kept_key(kept, capture_dir, frame, empty_filtered,
-                                                          capture.radar.grid)
+                                                          capture.radar.grid, antenna_files)
         gt = captures.ground_truth(capture_dir, capture, lambda: read((*_method_parts(cfg.prior.name), "mesh")),
                                    kept, key)
     grid = capture.radar.grid
@@ -578,15 +565,19 @@ def _computed_row(cfg: DictConfig, method, capture_dir: Path, frame: int, empty_
 
 
 def _next_job_here(hydra_cfg: DictConfig) -> bool:
-    """Whether the multirun's next job runs in this process after this one (the basic launcher): this job's last
-    output files may then be written while it starts (the merge callback waits for them)."""
-    return (hydra_cfg.mode == RunMode.MULTIRUN
-            and str(hydra_cfg.launcher.get("_target_", "")).endswith("BasicLauncher"))
+    """Whether the multirun's next job runs in this process after this one (the in-process and basic launchers):
+    this job's last output files may then be written while it starts (the merge callback waits for them)."""
+    return hydra_cfg.mode == RunMode.MULTIRUN and runs_jobs_here(hydra_cfg.launcher)
 
 
 def _isolate_warp_cache() -> None:
-    """Parallel jobs must not compile Warp kernels into one cache directory (DESIGN.md 8): one per process."""
-    if HydraConfig.get().mode == RunMode.MULTIRUN and "WARP_CACHE_PATH" not in os.environ:
+    """Parallel jobs must not compile Warp kernels into one cache directory (DESIGN.md 8): one per process for a
+    multirun whose jobs run in other processes (joblib, submitit). Jobs run in this process one after another (the
+    in-process and basic launchers) use Warp's own cache, as a single run does: kernels compiled by one sweep serve
+    the next (a folder per process id made every such sweep compile them anew: ~40 s for Table III on the H100)."""
+    hydra_cfg = HydraConfig.get()
+    if (hydra_cfg.mode == RunMode.MULTIRUN and not runs_jobs_here(hydra_cfg.launcher)
+            and "WARP_CACHE_PATH" not in os.environ):
         os.environ["WARP_CACHE_PATH"] = str(Path(tempfile.gettempdir()) / f"bench-warp-{os.getuid()}-{os.getpid()}")
 
 

@@ -8,13 +8,17 @@
   machine: joblib with more than one worker, submitit_local, SLURM arrays with array_parallelism > 1, any other
   launcher). Results rows carry it in the column `timing`, with 'contended' for a row the app timed alone while
   other processes kept the cores busy during its call (`contended`: on Linux, the CPU time every other process
-  used during the call, from /proc/stat minus our own, column `others_cores`, above half a core on average;
-  elsewhere the 1-minute load average, column `load_1m`, above the number of cores).
+  used during the call, from /proc/stat minus our own, column `others_cores`, above half a core on average; a call
+  shorter than 0.2 s is judged over the last 0.2 s of calls, `CpuClock`; elsewhere the 1-minute load average,
+  column `load_1m`, above the number of cores).
 """
 from __future__ import annotations
 
+import collections
+import dataclasses
 import math
 import os
+import time
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
@@ -111,6 +115,64 @@ def processes_cpu_s(pids) -> float:
     return total_ticks / os.sysconf("SC_CLK_TCK") if total_ticks else 0.0
 
 
+MIN_WINDOW_S = 0.2    # /proc/stat counts 10 ms clock ticks: one stray tick is 0.05 core over 0.2 s, 0.3 over 30 ms
+MAX_WINDOW_S = 1.0    # the furthest back a short call's window reaches
+
+
+@dataclasses.dataclass(frozen=True)
+class CpuSample:
+    """What the machine and the job had used at one moment: wall clock (s), the machine's busy CPU seconds
+    (`busy_cpu_s`), this process's CPU seconds and its descendants' by process id."""
+
+    wall_s: float
+    busy_s: float
+    own_s: float
+    helpers_s: dict[int, float]
+
+
+class CpuClock:
+    """Samples taken around the job's timed calls, and the cores the rest of the machine used over a call
+    (`others_cores`). A call shorter than MIN_WINDOW_S is judged over the last MIN_WINDOW_S or more ending with it
+    (from an earlier call's sample, at most MAX_WINDOW_S back): /proc/stat's 10 ms ticks make a 23-40 ms window read
+    one tick of any process as ~0.3 core, so that calls of the camera-only cell on an idle host read 0.63-0.69 and
+    were marked contended. Other jobs that take the cores run for seconds, not for one call's 30 ms: a longer window
+    still sees them. The job's own CPU (its threads, its child processes: the output process, the fork server that
+    starts it) is not the rest of the machine's."""
+
+    def __init__(self, read=None):
+        self.read = read or self._read
+        self.samples: collections.deque[CpuSample] = collections.deque(maxlen=256)
+
+    @staticmethod
+    def _read() -> CpuSample:
+        helpers = descendants()
+        return CpuSample(time.perf_counter(), busy_cpu_s(), time.process_time(),
+                         {pid: processes_cpu_s([pid]) for pid in helpers})
+
+    def sample(self) -> CpuSample:
+        taken = self.read()
+        self.samples.append(taken)
+        return taken
+
+    def others_cores(self, start: CpuSample, end: CpuSample) -> float:
+        """The rest of the machine's average CPU use (cores) over the call from `start` to `end` (both `sample`s),
+        widened for a short call (class doc); NaN where unknown (off Linux, a window under 20 ms)."""
+        if end.wall_s - start.wall_s < MIN_WINDOW_S:
+            earlier = [s for s in self.samples if end.wall_s - MAX_WINDOW_S <= s.wall_s <= start.wall_s]
+            widened = [s for s in earlier if s.wall_s <= end.wall_s - MIN_WINDOW_S]
+            start = widened[-1] if widened else (earlier[0] if earlier else start)
+        window_s = end.wall_s - start.wall_s
+        own_s = end.own_s - start.own_s + sum(cpu_s - start.helpers_s.get(pid, 0.0)
+                                              for pid, cpu_s in end.helpers_s.items())
+        others_s = end.busy_s - start.busy_s - own_s
+        if window_s < 0.02 or not math.isfinite(others_s):
+            return float("nan")
+        return max(0.0, others_s) / window_s
+
+
+CLOCK = CpuClock()
+
+
 def contended(load_1m: float, others_cores: float = float("nan")) -> bool:
     """Whether a runtime had to share the cores: other processes used more than OTHERS_CORES_MAX cores on average
     during the call (`others_cores`, where measured); else, by the 1-minute load average, more runnable tasks
@@ -120,13 +182,19 @@ def contended(load_1m: float, others_cores: float = float("nan")) -> bool:
     return load_1m > (os.cpu_count() or 1)
 
 
+def runs_jobs_here(launcher: DictConfig) -> bool:
+    """Whether a launcher (its Hydra config) runs a multirun's jobs one after another in the sweep's process:
+    Hydra's basic launcher and ours (hydra_plugins/mm2fsk_bench/inprocess.py)."""
+    return str(launcher.get("_target_", "")).endswith(("BasicLauncher", "InProcessLauncher"))
+
+
 def timing_mode(hydra_cfg: DictConfig) -> str:
     """'alone' or 'parallel' for the job whose Hydra config (HydraConfig.get()) this is (module docstring)."""
     if hydra_cfg.mode != RunMode.MULTIRUN or sweep_jobs() == 1:
         return "alone"
     launcher = hydra_cfg.launcher
     target = str(launcher.get("_target_", ""))
-    if target.endswith("BasicLauncher"):
+    if runs_jobs_here(launcher):
         return "alone"
     if target.endswith("JoblibLauncher"):
         n_jobs = int(launcher.n_jobs)                         # joblib: -1 = every core, -2 = all but one, ...

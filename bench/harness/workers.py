@@ -31,7 +31,7 @@ import numpy as np
 
 from bench.harness.results import write_depth
 from methods.domain.capture import RadarGrid
-from metrics.chamfer import usable_cores
+from methods.domain.host import usable_cores
 from metrics.evaluate import GroundTruth, evaluate, no_ground_truth_scores
 from metrics.resample import resample_depth_m, resample_nearest
 

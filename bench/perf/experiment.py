@@ -1,14 +1,16 @@
 """A whole experiment as a user runs it, its wall time beside its methods' and metrics' time, split by stage.
 
 `python -m bench.perf experiment NAME --root DIR [--device cpu|cuda] [--grid G] [--cells CELL ...] [--repeat N]
-[--set KEY=VALUE ...] [--no-store] [--out DIR]` runs `python -m bench -m experiment=NAME hydra/launcher=basic
-dataset=maroon dataset.root=DIR device=D` (one job at a time, as the demo runs it) in a fresh process with the stage
-clock on (bench.harness.stages): seconds in composing the jobs' configurations, imports, reading captures, the
-ground truth, the methods (`methods.reconstruct` calls: prior, warm-up, method), the metrics, the output files (on
-the main thread: what it waited for; `outputs (background)` is the writer thread's, the output process's and the
-scoring workers' time, overlapped; with scoring workers, bench.harness.workers, the metrics are theirs,
-overlapped), the merge (tables and plots), and `other` (the interpreter, Hydra's start and its first composition,
-job set-up).
+[--set KEY=VALUE ...] [--no-store] [--launcher L] [--out DIR]` runs `python -m bench -m experiment=NAME
+hydra/launcher=L dataset=maroon dataset.root=DIR device=D` (L: inprocess, the default, or basic, Hydra's: one job
+at a time, as the demo runs it) in a fresh process with the stage clock on (bench.harness.stages): seconds in
+composing the jobs' configurations, the in-process launcher's per-job set-up (`launch`), imports, reading captures,
+the ground truth, the methods (`methods.reconstruct` calls: prior, warm-up, method), the metrics, the output files
+(on the main thread: what it waited for; `outputs (background)` is the writer thread's, the output process's and
+the scoring workers' time, overlapped; with scoring workers, bench.harness.workers, the metrics are theirs,
+overlapped), the merge (tables and plots), and `other` (Hydra's start and its first composition, the jobs' own
+set-up, the basic launcher's per-job set-up, and the interpreter's start and end outside the stage clock, printed
+apart).
 Runs: `cold`, a store that keeps nothing yet (the ground truth is cast from the meshes), then `--repeat` runs
 `kept` on the store it left with its cells removed (every cell computes again; the ground truth kept by content
 is read back, as a second experiment on the same captures finds it). `--no-store` runs as `store.dir=null` does
@@ -35,18 +37,18 @@ from bench import cli
 from bench.harness.stages import ENV
 from bench.perf.common import add_out_option, write_rows
 
-STAGES = ("composition", "imports", "reading", "ground truth", "methods", "metrics", "outputs", "merge")
+STAGES = ("composition", "launch", "imports", "reading", "ground truth", "methods", "metrics", "outputs", "merge")
 
 
-def run_once(name: str, root: Path, device: str, extra: list[str], store: Path, work: Path, no_store: bool = False
-             ) -> dict:
+def run_once(name: str, root: Path, device: str, extra: list[str], store: Path, work: Path, no_store: bool = False,
+             launcher: str = "inprocess") -> dict:
     """One `python -m bench -m experiment=NAME` in a fresh process: wall seconds, seconds per stage, the summed
     warm method runtimes of its rows and the load before it. `no_store`: `store.dir=null`, `store` as the cache."""
     stages_file, sweep = work / "stages.json", work / "sweep"
     shutil.rmtree(sweep, ignore_errors=True)
     kept = ["store.dir=null", f"store.cache={store}"] if no_store else [f"store.dir={store}"]
-    command = [sys.executable, "-m", "bench", "-m", f"experiment={name}", "hydra/launcher=basic", "dataset=maroon",
-               f"dataset.root={root}", f"device={device}", *kept, f"hydra.sweep.dir={sweep}", *extra]
+    command = [sys.executable, "-m", "bench", "-m", f"experiment={name}", f"hydra/launcher={launcher}",
+               "dataset=maroon", f"dataset.root={root}", f"device={device}", *kept, f"hydra.sweep.dir={sweep}", *extra]
     load_1m = os.getloadavg()[0]
     started = time.perf_counter()
     result = subprocess.run(command, env={**os.environ, ENV: str(stages_file)}, capture_output=True, text=True)
@@ -55,11 +57,13 @@ def run_once(name: str, root: Path, device: str, extra: list[str], store: Path, 
         raise cli.UserError(f"experiment={name}", f"the sweep failed: {result.stderr.strip().splitlines()[-1:]}")
     spent = json.loads(stages_file.read_text())
     rows = pd.read_csv(sweep / "results.csv")
-    row = {"experiment": name, "device": device, "rows": len(rows), "wall_s": wall_s, "load_1m_before": load_1m,
+    row = {"experiment": name, "device": device, "launcher": launcher, "rows": len(rows), "wall_s": wall_s,
+           "load_1m_before": load_1m,
            **{f"{stage.replace(' ', '_')}_s": spent["stages_s"].get(stage, 0.0) for stage in STAGES}}
     row["outputs_background_s"] = spent["background_s"].get("outputs", 0.0)
     row["metrics_workers_s"] = spent["background_s"].get("metrics", 0.0)
     row["other_s"] = wall_s - sum(spent["stages_s"].get(stage, 0.0) for stage in STAGES)
+    row["outside_s"] = wall_s - spent["process_s"]     # the interpreter's start and end, outside the stage clock
     row["method_runtime_s"] = float(rows.runtime_ms.sum()) / 1e3
     row["methods_metrics_s"] = row["methods_s"] + row["metrics_s"] + row["metrics_workers_s"]
     row["ratio"] = wall_s / row["methods_metrics_s"]
@@ -70,13 +74,14 @@ def _print(row: dict, label: str) -> None:
     stages = "  ".join(f"{stage} {row[stage.replace(' ', '_') + '_s']:.2f}" for stage in STAGES)
     print(f"{label:5s} wall {row['wall_s']:6.1f} s = {row['ratio']:.2f} x methods+metrics "
           f"{row['methods_metrics_s']:.2f} s (methods' own runtimes {row['method_runtime_s']:.2f} s) | {stages}  "
-          f"other {row['other_s']:.2f}  [outputs on their thread {row['outputs_background_s']:.2f}, "
+          f"other {row['other_s']:.2f} (of it before and after the app {row['outside_s']:.2f})  "
+          f"[outputs on their thread {row['outputs_background_s']:.2f}, "
           f"scoring in workers {row['metrics_workers_s']:.2f}]  "
           f"load {row['load_1m_before']:.1f}", flush=True)
 
 
-def measure(name: str, root: Path, device: str, extra: list[str], repeat: int, no_store: bool = False
-            ) -> list[dict]:
+def measure(name: str, root: Path, device: str, extra: list[str], repeat: int, no_store: bool = False,
+            launcher: str = "inprocess") -> list[dict]:
     """The cold run, then `repeat` runs with the ground truth kept (module doc)."""
     rows = []
     with tempfile.TemporaryDirectory(prefix="perf_experiment-") as work:
@@ -85,7 +90,7 @@ def measure(name: str, root: Path, device: str, extra: list[str], repeat: int, n
             shutil.rmtree(store / "cells", ignore_errors=True)
             label = "cold" if i == 0 else "kept"
             rows.append({"run": label, "store": "off" if no_store else "on",
-                         **run_once(name, root, device, extra, store, Path(work), no_store)})
+                         **run_once(name, root, device, extra, store, Path(work), no_store, launcher)})
             _print(rows[-1], label)
     return rows
 
@@ -101,6 +106,8 @@ def main(argv=None) -> int:
     parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="further overrides of every run")
     parser.add_argument("--no-store", action="store_true",
                         help="run with store.dir=null, the ground truth kept in a store.cache of the runs")
+    parser.add_argument("--launcher", default="inprocess", choices=["inprocess", "basic"],
+                        help="inprocess (the default launcher) or basic (Hydra's): jobs one at a time in the process")
     add_out_option(parser)
     args = parser.parse_args(argv)
     root = cli.existing_path(args.root, "dir", "--root").resolve()
@@ -108,7 +115,7 @@ def main(argv=None) -> int:
     out = cli.output_dir(args.out)
     extra = ([f"grid={args.grid}"] if args.grid else []) + ([f"cell={','.join(args.cells)}"] if args.cells else [])
     extra += args.set
-    rows = measure(args.name, root, device, extra, args.repeat, args.no_store)
+    rows = measure(args.name, root, device, extra, args.repeat, args.no_store, args.launcher)
     write_rows(rows, out / f"perf_experiment_{args.name}_{device}.csv")
     return 0
 

@@ -37,6 +37,7 @@ import numpy as np
 from PIL import Image
 
 from bench.report import keyed, sheet
+from methods.domain.host import usable_cores
 
 SIGNED_ERROR_LIMIT_CM = 2.0      # colour range of the signed error: +-2 cm, beyond saturates (arrows on the bar)
 MAGNITUDE_RANGE_DB = 20.0        # magnitude colours span the strongest pixel down to -20 dB (the filter keeps -14)
@@ -535,7 +536,7 @@ def sweep_pictures(runs: list[tuple[str, Path]], out_dir: Path, priors: dict[str
     written = {stem: picture_files(out_dir, stem) for stem in stems}
     if not stems:
         return written
-    workers = max(1, min(len(stems), workers or os.cpu_count() or 1))
+    workers = max(1, min(len(stems), workers or usable_cores()))
     redrawn = 0
     with bar(len(stems), f"pictures ({use})", unit="capture") as progress, \
             ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:

@@ -13,6 +13,8 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.ticker import LogFormatter  # noqa: E402
 
+from methods.domain.host import usable_cores  # noqa: E402
+
 MARKERS = "osD^vP*Xph<>"   # the rows of one method in the runtime plot (its colour), repeating beyond 12
 ERROR_LIMIT_CM = 2.0     # colour scale of the signed error maps: -2 .. +2 cm (larger errors saturate)
 
@@ -94,7 +96,7 @@ def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path, workers: int |
         paths.append(path)
         if not keys.fresh(stem, key, [path]):
             stale[stem] = key
-    workers = min(len(stale), workers or _cores())
+    workers = min(len(stale), workers or usable_cores())
     if workers > 1 and _fork_safe():
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
@@ -109,10 +111,6 @@ def depth_error_maps(runs: list[tuple[str, Path]], out_dir: Path, workers: int |
             _depth_error_map(runs, stem, out_dir / f"{stem}.png")
             keys.record(stem, key)
     return paths
-
-
-def _cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def _fork_safe() -> bool:

@@ -14,7 +14,6 @@ import contextlib
 import functools
 import multiprocessing
 import multiprocessing.forkserver
-import os
 import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
@@ -22,6 +21,7 @@ from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from threadpoolctl import threadpool_limits
 
 from bench.synth.radar import leg_sum, remote
+from methods.domain.host import usable_cores
 
 MIN_CORES_FOR_PROCESSES = 4     # below this, threads: a worker's start (imports: ~1 s of a core) is not won back
 START_METHOD = "forkserver"    # not fork (this process may hold CUDA), not spawn (each worker would import all)
@@ -29,15 +29,10 @@ PRELOAD = ["bench.synth.parts", "bench.synth.camera.depth"]     # what a worker 
                                                                # by the forkserver
 
 
-def cores() -> int:
-    """Cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-
-
 def capture_workers() -> int:
     """Capture parts built at once: one per leg_sum.PARTIAL_SUMS cores and at least two, so that one part's
     single-threaded stages overlap the others' radar sums (docs/measurements/synth.md)."""
-    return max(2, cores() // leg_sum.PARTIAL_SUMS)
+    return max(2, usable_cores() // leg_sum.PARTIAL_SUMS)
 
 
 def capture_processes() -> bool:
@@ -47,7 +42,7 @@ def capture_processes() -> bool:
     guard its body with `if __name__ == "__main__"`; its captures are built in threads."""
     main = sys.modules.get("__main__")
     safe_main = getattr(main, "__spec__", None) is not None or getattr(main, "__file__", None) is None
-    return (safe_main and cores() >= MIN_CORES_FOR_PROCESSES
+    return (safe_main and usable_cores() >= MIN_CORES_FOR_PROCESSES
             and not multiprocessing.current_process().daemon        # a daemonic process may not have children
             and START_METHOD in multiprocessing.get_all_start_methods() and _semaphores_work())
 
@@ -84,7 +79,7 @@ def builders(count: int, device: str) -> Iterator[Callable[..., Future]]:
         context.set_forkserver_preload(PRELOAD)
     with contextlib.ExitStack() as stack:
         server = stack.enter_context(remote.DeviceServer()) if device != "cpu" else None
-        threads = max(leg_sum.PARTIAL_SUMS, cores() // count)     # the cores shared out among the workers' sums
+        threads = max(leg_sum.PARTIAL_SUMS, usable_cores() // count)     # the cores shared out among the workers' sums
         pool = stack.enter_context(ProcessPoolExecutor(
             count, mp_context=context, initializer=_start_worker,
             initargs=(threads, None if server is None else server.address)))

@@ -20,6 +20,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from methods.backends.base import Backend, check_inputs, grid_vectors
+from methods.domain.host import usable_cores
 from methods.domain.radar import C_M_PER_S
 from methods.ops.depth_peak import peak_depth_m
 from methods.ops.timing import StageTimer
@@ -30,9 +31,9 @@ CHUNK_POINTS = 2048     # most points per block: keeps the (chunk x 2*94) float3
 MIN_PARALLEL_POINTS = 128
 
 
-def _n_threads() -> int:
-    """Worker threads over point chunks: CORRELATE_THREADS if set, else one per CPU core."""
-    return max(1, int(os.environ.get("CORRELATE_THREADS", "0")) or (os.cpu_count() or 1))
+def correlation_threads() -> int:
+    """Worker threads over point chunks: CORRELATE_THREADS if set, else one per core this process may use."""
+    return max(1, int(os.environ.get("CORRELATE_THREADS", "0")) or usable_cores())
 
 
 @functools.cache
@@ -131,7 +132,7 @@ def correlate_numpy(signal: np.ndarray, freqs_hz: np.ndarray, tx_m: np.ndarray, 
     blocks = [_real_block_matrix(signal[:, :, i] * scale) for i in range(len(freqs_hz))]
     wavenumbers = 2.0 * np.pi * freqs_hz / C_M_PER_S
     out = np.empty((len(freqs_hz), len(points_m)), dtype=np.complex64)
-    n_threads = _n_threads()
+    n_threads = correlation_threads()
     starts = chunk_starts(len(points_m), n_threads)
 
     def work(start: int) -> None:

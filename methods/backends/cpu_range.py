@@ -29,13 +29,13 @@ GIL).
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from methods.backends.cpu import correlation_threads
 from methods.backends.cpu import path_excess_m as _path_excess_m
 from methods.backends.cpu import phasor_mod_2pi as _phasor_mod_2pi
 from methods.domain.radar import C_M_PER_S
@@ -142,10 +142,6 @@ def _chunk(table: RangeTable, tx_m: np.ndarray, rx_m: np.ndarray, points_m: np.n
     return acc * _phasor_mod_2pi(norm_m * (2.0 * table.f_carrier_hz / C_M_PER_S))
 
 
-def _n_threads() -> int:
-    return max(1, int(os.environ.get("CORRELATE_THREADS", "0")) or (os.cpu_count() or 1))
-
-
 def correlate_range_cpu(table: RangeTable, tx_m: np.ndarray, rx_m: np.ndarray, points_m: np.ndarray) -> np.ndarray:
     """Frequency-summed correlation complex64 (N,) at points (N, 3), metres, from the frame's `range_table` (which
     must cover the points' paths: build it with `path_bounds_m` of these or enclosing points)."""
@@ -160,7 +156,7 @@ def correlate_range_cpu(table: RangeTable, tx_m: np.ndarray, rx_m: np.ndarray, p
         chunk = order[start:start + CHUNK_POINTS]
         out[chunk] = _chunk(table, tx_m, rx_m, points_m[chunk])
 
-    n_threads = _n_threads()
+    n_threads = correlation_threads()
     with threadpool_limits(limits=1, user_api="blas"):
         if n_threads == 1 or len(starts) <= 1:
             for s in starts:

@@ -43,7 +43,7 @@ argmax with them, so `bench.perf skips` and docs/measurements/formation.md measu
   cm), so a pixel's peak lies where its corners' peaks are. With `weak_db` >= 0 a pixel whose four corners' coarse
   maxima all lie weak_db below the filter-aware skip level (below) evaluates nothing (depth NaN, magnitude 0).
   The magnitude is smooth over the lattice but the depth of broad (two-frequency) lobes need not be: a pixel can
-  hold its peak where no corner has a candidate (the catalogue's bottle, formation.md 13). With `recheck_db` >= 0 a
+  hold its peak where no corner has a candidate (the catalogue's bottle, formation.md 14). With `recheck_db` >= 0 a
   pixel whose peak after its search lies more than recheck_db below the mean (dB) of its corners' peaks, where that
   mean reaches the filter-aware skip level, takes every coarse sample and is searched again, as a lattice pixel.
 * vertex jump (`jump`): a pixel with a single candidate after the coarse samples refines at the vertex of the

@@ -213,3 +213,15 @@ def test_cpu_small_batches_on_the_calling_thread_give_the_pools_values():
     pooled = correlate_numpy(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m)
     small = correlate_numpy(signal, freqs_hz, ANT.tx_m, ANT.rx_m, points_m[:MIN_PARALLEL_POINTS // 3])
     assert rel_err(small, pooled[:, :MIN_PARALLEL_POINTS // 3]) < 1e-6
+
+
+def test_cpu_correlation_threads_follow_the_process_affinity_unless_set(monkeypatch):
+    from methods.backends import cpu
+    from methods.domain import host
+
+    monkeypatch.delenv("CORRELATE_THREADS", raising=False)
+    monkeypatch.setattr(host.os, "sched_getaffinity", lambda pid: {1, 4}, raising=False)
+    monkeypatch.setattr(host.os, "cpu_count", lambda: 224)       # the host's cores, not the container's
+    assert cpu.correlation_threads() == 2
+    monkeypatch.setenv("CORRELATE_THREADS", "3")
+    assert cpu.correlation_threads() == 3

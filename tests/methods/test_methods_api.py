@@ -182,3 +182,39 @@ def test_cuda_checks_the_samples_it_uploads(tilted_plate, monkeypatch, device):
     with pytest.raises(ValueError, match=f"^the radar frame of capture {tilted_plate.name} has NaN or Inf samples$"):
         reconstruct(nan_frame, "bp", None, grid=grid, device=device)
     assert not backend.samples_checked(nan_frame.radar.signal)
+
+
+@pytest.mark.parametrize("device", [CUDA])
+@pytest.mark.parametrize("method, config, prior", [("mm2fsk", "d10", "realsense"), ("mm3fsk", "d05_d10", "realsense"),
+                                                   ("2fsk", "d05", "none"), ("3fsk", "d05_d10", "none")])
+def test_cuda_frame_graphs_check_the_samples_they_gather(tilted_plate, monkeypatch, device, method, config, prior):
+    """The frame graphs of MM-2FSK, MM-3FSK, 2FSK and 3FSK gather the used frequencies' samples from the frame and
+    check them on the device: the host neither takes nor checks them for a finite frame, and a NaN at a used
+    frequency is refused with the host's message."""
+    from methods import api
+    from methods.ops.frequencies import config_indices
+
+    host_checks, check_signal = [], api._check_signal
+    monkeypatch.setattr(api, "_check_signal", lambda capture, signal: host_checks.append(1) or check_signal(
+        capture, signal))
+    grid = square_grid(0.003, 7, 0.29, 0.31, 11)
+    on_device = reconstruct(tilted_plate, method, config, prior=prior, grid=grid, device=device)
+    assert host_checks == [] and on_device.valid.any()
+    signal = tilted_plate.radar.signal.copy()
+    signal[3, 5, config_indices(tilted_plate.radar.freqs_hz, config)[-1]] = np.nan
+    nan_frame = dataclasses.replace(tilted_plate, radar=dataclasses.replace(tilted_plate.radar, signal=signal))
+    with pytest.raises(ValueError, match=f"^the radar frame of capture {tilted_plate.name} has NaN or Inf samples$"):
+        reconstruct(nan_frame, method, config, prior=prior, grid=grid, device=device)
+
+
+def test_any_valid_is_whether_some_depth_is_finite():
+    """The API's test for an all-invalid result (a sparse sample first, then a full pass) against its definition on
+    random maps with few finite depths, off the sample's stride and on it, NaN and Inf."""
+    from methods.api import _any_valid
+
+    rng = np.random.default_rng()
+    for _ in range(200):
+        depth_m = np.full(rng.integers(1, 60, size=2), np.nan)
+        depth_m[rng.random(depth_m.shape) < rng.choice([0.0, 0.01, 0.3])] = 0.3
+        depth_m[rng.random(depth_m.shape) < 0.05] = rng.choice([np.inf, -np.inf])
+        assert _any_valid(depth_m) == bool(np.isfinite(depth_m).any())

@@ -304,7 +304,7 @@ def test_pixel_lattice_inherits_the_peaks_of_laterally_smooth_profiles(record_pr
 
 
 def test_lattice_pixels_whose_peak_no_corner_holds_are_searched_again(record_property):
-    # the bottle's lost pixels (formation.md 13): the magnitude is laterally smooth over the 2 mm lattice but the
+    # the bottle's lost pixels (formation.md 14): the magnitude is laterally smooth over the 2 mm lattice but the
     # depth of broad two-frequency lobes is not, so a pixel between lattice pixels can hold its peak where none of
     # its corners has a candidate. Here every pixel has lobe A (1 cm wide) at the lattice pixels' depth and a random
     # third of the other pixels a stronger lobe B 3-5 cm deeper, which the lattice pixels hold 20 dB down; their A

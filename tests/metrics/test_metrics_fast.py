@@ -100,6 +100,7 @@ def test_c_s_and_off_err_from_one_query_equal_two_queries_and_brute_force():
 
 
 def test_queries_run_on_the_cores_the_process_may_use_not_the_hosts(monkeypatch):
+    from methods.domain import host
     from metrics import chamfer
 
     threads = []
@@ -111,8 +112,8 @@ def test_queries_run_on_the_cores_the_process_may_use_not_the_hosts(monkeypatch)
             return np.zeros(len(src)), None
 
     points._tree = Tree()
-    monkeypatch.setattr(chamfer.os, "sched_getaffinity", lambda pid: {0, 3, 5}, raising=False)
-    monkeypatch.setattr(chamfer.os, "cpu_count", lambda: 224)
+    monkeypatch.setattr(host.os, "sched_getaffinity", lambda pid: {0, 3, 5}, raising=False)
+    monkeypatch.setattr(host.os, "cpu_count", lambda: 224)
     nearest_distances_m(np.zeros((4, 3)), points)
     monkeypatch.setattr(chamfer, "QUERY_THREADS", 1)                 # a scoring worker's setting
     nearest_distances_m(np.zeros((4, 3)), points)

@@ -23,7 +23,6 @@ from __future__ import annotations
 import collections
 import contextlib
 import functools
-import os
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -33,6 +32,7 @@ from threadpoolctl import threadpool_limits
 
 from bench.synth.config import C_M_PER_S
 from bench.synth.radar.frequency_nodes import interpolator
+from methods.domain.host import usable_cores
 
 RESEED_STEPS = 16       # exact phasors every 16 nodes bound the complex64 recursion error to ~1e-6
 BLOCK_ROWS = 2048       # rows per block: small enough that a block spans a few cm, large enough for BLAS
@@ -128,8 +128,7 @@ def limit_threads(count: int) -> None:
 @functools.cache
 def _threads() -> int:
     """Threads of the block pool: one per core (or limit_threads's count), at least PARTIAL_SUMS."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(PARTIAL_SUMS, *_thread_limit[:1] or [cores])
+    return max(PARTIAL_SUMS, *_thread_limit[:1] or [usable_cores()])
 
 
 @functools.cache

@@ -11,6 +11,7 @@ from methods.backends.warp.frame_graph import frame_graph, fsk_graph
 from methods.backends.warp.frames import BufferPool, FrameCache
 from methods.backends.warp.prior import DeferredPrior
 from methods.backends.warp.runtime import init
+from methods.domain.samples import FrameSamples
 from methods.ops import range_compression
 from methods.ops.filtering import DEFAULT_THRESHOLD_DB
 from methods.ops.timing import StageTimer
@@ -54,15 +55,22 @@ class WarpBackend(Backend):
     def holding_frame(self, signal):
         return self.frames.held(signal)
 
-    def checks_samples(self, signal: np.ndarray) -> bool:
-        """Whether this backend checks `signal` (n_rx, n_tx, F) for NaN/Inf samples on the device when it uploads
-        it (`FrameCache.checks`: CUDA, frames of >= 1 MB), raising `NonFiniteSignal`; the caller then skips its own
-        check, and asks `samples_checked` after the run (a method that never uploads it was not checked)."""
-        return self.frames.checks(np.asarray(signal))
+    def checks_samples(self, samples) -> bool:
+        """Whether this backend checks `samples` (a FrameSamples or an array (n_rx, n_tx, F)) for NaN/Inf on the
+        device where it stages them, raising `NonFiniteSignal`: on CUDA the frame graphs (MM-2FSK, MM-3FSK, their
+        gathered complex64 samples) and the frame cache (`FrameCache.checks`: frames of >= 1 MB). The caller then
+        skips its own check before the run and asks `samples_checked` after it (a method that staged them elsewhere
+        was not checked)."""
+        if isinstance(samples, FrameSamples):
+            return not self.device.is_cpu and samples.dtype == np.complex64
+        return self.frames.checks(np.asarray(samples))
 
-    def samples_checked(self, signal: np.ndarray) -> bool:
-        """Whether this very array's samples were checked (and found finite) by the last frame lookup."""
-        return self.frames.checked(signal)
+    def samples_checked(self, samples) -> bool:
+        """Whether these samples were checked (and found finite): by a frame graph (`FrameSamples.checked`) or by
+        the last frame lookup of this very array."""
+        if isinstance(samples, FrameSamples):
+            return samples.checked or (samples.taken is not None and self.frames.checked(samples.taken))
+        return self.frames.checked(samples)
 
     def make_launch(self, signal, freqs_hz, tx_m, rx_m, *, kernel: str | None = None, points_m=None, grid_m=None,
                     sum_freqs: bool = False, reuse: bool = False):
@@ -187,10 +195,10 @@ class WarpBackend(Backend):
             raise ValueError("depth_at_prior needs a prior held on this backend's device")
         if threshold_db is not None and threshold_db < 0:
             raise ValueError(f"threshold_db is dB below the maximum and must be >= 0, got {threshold_db}")
-        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         keep_ratio = 0.0 if threshold_db is None else float(10.0 ** (-threshold_db / 20.0))
         timer = timer or StageTimer()
         if isinstance(prior, DeferredPrior) and prior.pending and len(freqs_hz) == 2:
+            freqs_hz, tx_m, rx_m = staged_inputs(signal, freqs_hz, tx_m, rx_m)
             with timer.stage("correlate"):             # the prior, correlation, depth and filter: one graph
                 graph = frame_graph(self.buffers, prior.depth, prior.realsense2radar, grid, prior.max_jump_mm,
                                     freqs_hz, tx_m, rx_m, keep_ratio)
@@ -199,6 +207,7 @@ class WarpBackend(Backend):
             return depth_m, magnitude, prior_m
         if roi_pixels is not None:
             raise ValueError("only a pending DeferredPrior's frame graph restricts pixels to a region of interest")
+        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
         if isinstance(prior, DeferredPrior):
             prior = prior.materialise()
 
@@ -212,7 +221,7 @@ class WarpBackend(Backend):
         prior not built yet; None (the host path) for any other prior."""
         if not (isinstance(prior, DeferredPrior) and prior.pending):
             return None
-        signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+        freqs_hz, tx_m, rx_m = staged_inputs(signal, freqs_hz, tx_m, rx_m)
         with timer.stage("correlate"):
             graph = frame_graph(self.buffers, prior.depth, prior.realsense2radar, grid, prior.max_jump_mm, freqs_hz,
                                 tx_m, rx_m, self._keep_ratio(threshold_db), coarse)
@@ -238,7 +247,7 @@ class WarpBackend(Backend):
                      timer, keep=None):
         freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
         if not self.device.is_cpu:                    # one CUDA graph per setting: stage 'correlate' holds it all
-            signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+            freqs_hz, tx_m, rx_m = staged_inputs(signal, freqs_hz, tx_m, rx_m)
             with timer.stage("correlate"):
                 maps, (z1_m, ref), *evaluated = fsk_graph(
                     self.buffers, grid, pixels, freqs_hz, [0, 1], False, tx_m, rx_m, prior_m,
@@ -253,7 +262,7 @@ class WarpBackend(Backend):
                   keep=None):
         freqs_hz = np.asarray(freqs_hz, dtype=np.float64)
         if not self.device.is_cpu:
-            signal, freqs_hz, tx_m, rx_m = check_inputs(signal, freqs_hz, tx_m, rx_m)
+            freqs_hz, tx_m, rx_m = staged_inputs(signal, freqs_hz, tx_m, rx_m)
             with timer.stage("correlate"):
                 maps, (z1_m, ref), *evaluated = fsk_graph(
                     self.buffers, grid, pixels, freqs_hz, list(coarse), True, tx_m, rx_m, prior_m,
@@ -261,6 +270,7 @@ class WarpBackend(Backend):
             return maps[0], maps[1], maps[2], {"reference_pixel": ref, "z1_m": z1_m, **_evaluated(evaluated)}
         if keep is not None:
             raise ValueError("the fsk_keep skip runs on the device only on CUDA (keeps_on_device)")
+        signal = np.asarray(signal)
         coarse_signal = np.ascontiguousarray(signal[:, :, coarse])
         return fsk.three_fsk(self.buffers, self._point_correlator(coarse_signal, freqs_hz[coarse], tx_m, rx_m),
                              self._point_correlator(signal, freqs_hz, tx_m, rx_m), grid, pixels, freqs_hz,
@@ -281,6 +291,14 @@ class WarpBackend(Backend):
             for module in (prior_kernels, fsk_kernels):
                 wp.load_module(module=module.__name__, device=self.device)
         self.warmed.add(key)
+
+
+def staged_inputs(samples, freqs_hz, tx_m, rx_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`check_inputs`' checks and (freqs_hz, tx_m, rx_m) for samples a frame graph gathers into its own staging buffer
+    (a FrameSamples is not taken into an array of its own: its shape is checked)."""
+    if isinstance(samples, FrameSamples):
+        samples = np.empty(samples.shape, dtype=samples.dtype)     # its shape and type (memory never touched)
+    return check_inputs(samples, freqs_hz, tx_m, rx_m)[1:]
 
 
 def _evaluated(rest: list) -> dict:

@@ -1,23 +1,28 @@
-"""A whole MM-2FSK (or MM-3FSK) new frame as one CUDA graph: the RealSense prior (camera quads, the scanline hole
-fill), the correlation at the prior (tables built from the raw samples, tensor cores), depth and filter, and the
-copies in and out, replayed per frame with one launch and one synchronisation (`FrameGraph.run`).
+"""A whole MM-2FSK (or MM-3FSK) new frame as two CUDA graphs: the RealSense prior (camera quads, the scanline hole
+fill), then the correlation at the prior (tables built from the raw samples, tensor cores), depth and filter, and the
+copies in and out, replayed per frame with two launches and one synchronisation (`FrameGraph.run`); the host
+gathers the frame's samples while the device builds the prior (one graph cost 0.69-0.78 ms a 301 x 301 call on the
+H100, against 0.56 ms with the prior launched first: formation.md section 13).
 
 The launches are those of the step-by-step device path (`warp_backend.prior.realsense_prior` with fill
 'scanline', then `warp_backend.fsk.depth_at_prior`), on buffers allocated once per setting (depth image size,
 grid, camera, transform, frequencies, antennas, filter threshold: `graph_key`) so that their addresses stay
 fixed, and with launch sizes that do not depend on the frame: the covered pixels are compacted into slots as
 before and every later kernel runs over all ny * nx slots, threads (and the correlation's blocks) past the count
-returning at once, so the count never goes to the host before the end. A new frame's samples,
-depth image and mask are copied into pinned staging buffers on the host; the graph's first nodes copy them to the
-device. With a coarse pair (MM-3FSK, `methods.mm3fsk`) the correlation at the prior is the coarse pair's; the
-median of its corrections over the pixels the filter keeps (`MedianOffset`: a radix select on the corrections
-quantised to 2^32 steps over +-3.2 rad, within 3e-11 m of np.median's for d05_d10's pair) moves every point, the
-three frequencies are correlated there and the slope gives the depth, still one launch and one copy back.
-Warp-CPU has no graphs: there `run` issues the same launches (the correlation with the separable kernel,
-Warp-CPU's default), which is how the tests compare this path with the step-by-step one without a GPU.
+returning at once, so the count never goes to the host before the end. A new frame's depth image and mask are
+copied into pinned staging buffers on the host, its samples gathered into one (straight from the frame:
+`methods.domain.samples.FrameSamples`) and checked for NaN/Inf on the device; the graphs' first nodes copy them to
+the device, and the maps come back into pinned buffers lent to the caller (`HostMaps`). With a coarse pair
+(MM-3FSK, `methods.mm3fsk`) the correlation at the prior is the coarse pair's; the median of its corrections over
+the pixels the filter keeps (`MedianOffset`: a radix select on the corrections quantised to 2^32 steps over +-3.2
+rad, within 3e-11 m of np.median's for d05_d10's pair) moves every point, the three frequencies are correlated
+there and the slope gives the depth, still one copy back. Warp-CPU has no graphs: there `run` issues the same
+launches (the correlation with the separable kernel, Warp-CPU's default), which is how the tests compare this path
+with the step-by-step one without a GPU.
 """
 from __future__ import annotations
 
+import sys
 import weakref
 
 import numpy as np
@@ -30,6 +35,8 @@ from methods.backends.warp.kernels import fsk as fsk_kernels
 from methods.backends.warp.kernels import prior as prior_kernels
 from methods.backends.warp.kernels import tables as table_kernels
 from methods.backends.warp.prior import pixel_scale
+from methods.domain.errors import NonFiniteSignal
+from methods.domain.samples import FrameSamples
 
 GRAPHS_KEPT = 4
 PEAK_SHARDS = int(fsk_kernels.PEAK_SHARDS)     # partial maxima of the magnitude (fsk_kernels.reduce_peak)
@@ -74,23 +81,36 @@ class GraphCorrelator:
         self.tx4 = wp.array(antennas4(tx_m, int(ck.TC_ANT)), dtype=wp.vec4f, device=dev)
         self.scale = wp.float32(1.0 / (n_rx * n_tx))
         self.every = wp.array([2**31 - 1], dtype=wp.int32, device=dev)
+        self.nonfinite = wp.zeros(1, dtype=wp.int32, device=dev)
+        self.nonfinite_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=not dev.is_cpu)
+        self.nonfinite_view = self.nonfinite_host.numpy()
 
-    def load(self, signal: np.ndarray, indices: list[int] | None = None) -> None:
-        """Stage a frame's samples (n_rx, n_tx, F) (with `indices`, those frequencies of it) for the next run."""
-        if indices is not None and signal.dtype == np.complex64:     # gathered straight into the staging buffer
+    def load(self, signal: np.ndarray | FrameSamples, indices: list[int] | None = None) -> None:
+        """Stage a frame's samples (n_rx, n_tx, F) (with `indices`, those frequencies of it) for the next run: a
+        FrameSamples is gathered from its frame straight into the staging buffer."""
+        if isinstance(signal, FrameSamples):
+            signal.gather(self.raw_view, indices)
+        elif indices is not None and signal.dtype == np.complex64:     # gathered straight into the staging buffer
             np.take(signal, indices, axis=2, out=self.raw_view, mode="clip")
         else:
             np.copyto(self.raw_view, signal if indices is None else signal[:, :, indices], casting="same_kind")
 
-    def enqueue_tables(self) -> None:
+    def enqueue_tables(self, check: bool = False) -> None:
+        """Copy the staged samples in and build the tensor-core tables; `check`: also flag NaN/Inf samples
+        (`nonfinite_staged` after the run)."""
         dev = self.device
         wp.copy(self.raw, self.raw_host)
+        if check:
+            self.nonfinite.zero_()
+            wp.launch(table_kernels.flag_nonfinite, dim=self.raw.shape, inputs=[self.raw, self.nonfinite], device=dev)
+            wp.copy(self.nonfinite_host, self.nonfinite)
         if dev.is_cpu:
             return
-        self.gain_raw.zero_()
-        table_kernels.launch_signal_gain(self.raw, self.scale, self.gain_raw, dev)
-        wp.launch(table_kernels.tx_half_table, dim=self.mat_h.shape,
-                  inputs=[self.raw, self.scale, self.gain_raw, self.gain, self.mat_h], device=dev)
+        table_kernels.launch_tables(self.raw, self.scale, self.gain_raw, self.gain, self.mat_h, dev)
+
+    def nonfinite_staged(self) -> bool:
+        """Whether the last run's samples held NaN or Inf (after the device finished a run that checked them)."""
+        return bool(self.nonfinite_view[0])
 
     def enqueue(self, points: wp.array, count: wp.array | None = None, n_freqs: int | None = None) -> wp.array:
         """Phasors (F, n) of the n points into `out`; with `count` (device int32) only of the first count[0]
@@ -116,30 +136,106 @@ class GraphCorrelator:
         return self.out
 
 
-class HostMaps:
-    """The copy back of a graph's float64 maps (rows, n): row 1, the magnitude, comes back in float32 (exact: the
-    kernels compute it in float32), the other rows in float64; pinned host buffers, numpy views made once."""
+LENT_SETS = 3        # host buffer sets a graph lends out at a time (a caller keeping every result gets copies)
 
-    def __init__(self, maps: wp.array):
+
+def _captured(device, enqueue):
+    """`enqueue()`'s copies and launches captured as a CUDA graph on `device` (None on Warp-CPU: no graphs)."""
+    if device.is_cpu:
+        return None
+    with wp.ScopedCapture(device=device) as capture:
+        enqueue()
+    return capture.graph
+
+
+def _launch(graph, enqueue) -> None:
+    """Replay a captured graph, or issue `enqueue()`'s launches where there is none (Warp-CPU)."""
+    if graph is not None:
+        wp.capture_launch(graph)
+    else:
+        enqueue()
+
+
+class _HostSet:
+    """One set of host buffers for a graph's maps (rows, n), and the launches that fill it: `compute` (the frame's
+    launches that end in the maps) then the copies into the set, captured together as one CUDA graph (a launch of
+    its own for the copies cost more of the host's time than the copies). Its rows are lent as reshaped views of
+    one base array each: every array lent, and every view of one, refers to that base, so the set is free again
+    once no base has a reference beyond the set's own (`sys.getrefcount`; the base also keeps the memory alive
+    after the graph is dropped)."""
+
+    def __init__(self, maps: wp.array, magnitude: wp.array, compute):
         dev = maps.device
         rows, n = maps.shape
-        self.maps = maps
-        self.magnitude = wp.empty(n, dtype=wp.float32, device=dev)
-        pinned = not dev.is_cpu
-        self.hosts = [wp.empty(n, dtype=wp.float32 if r == 1 else wp.float64, device="cpu", pinned=pinned)
+        self.hosts = [wp.empty(n, dtype=wp.float32 if r == 1 else wp.float64, device="cpu", pinned=not dev.is_cpu)
                       for r in range(rows)]
         self.views = [h.numpy() for h in self.hosts]
+        if any(isinstance(v.base, np.ndarray) for v in self.views):     # views of views would skip to that base
+            raise RuntimeError("a host buffer's numpy view must be the base of the views made from it")
+        self._own = self._references()                               # the set's own
+        sources = [magnitude if r == 1 else maps[r] for r in range(rows)]
+
+        def enqueue():
+            compute()
+            for host, source in zip(self.hosts, sources, strict=True):
+                wp.copy(host, source)
+        self._enqueue = enqueue
+        self.graph = _captured(dev, enqueue)
+
+    def _references(self) -> list[int]:
+        return [sys.getrefcount(self.views[r]) for r in range(len(self.views))]
+
+    @property
+    def free(self) -> bool:
+        return self._references() == self._own
+
+    def launch(self) -> None:
+        _launch(self.graph, self._enqueue)
+
+    def lend(self, shape) -> list[np.ndarray]:
+        """The rows as arrays of `shape`, views of the set's buffers, lent until none of them is alive."""
+        return [v.reshape(shape) for v in self.views]
+
+
+class HostMaps:
+    """A graph's float64 maps (rows, n) copied back into page-locked host buffers that the caller gets as they are,
+    without a copy on the host (three copies out of one staging set cost ~0.14 ms of a 301 x 301 MM-2FSK frame on
+    the H100's host): row 1, the magnitude, in float32 (exact: the kernels compute it in float32), the others in
+    float64. A set of buffers is lent with a frame's arrays and reused only once none of them, nor a view of one, is
+    alive (`_HostSet.free`): a result the caller keeps is never overwritten. While LENT_SETS sets are lent, a
+    frame's arrays are copies of a spare set's (as before). Each set launches the frame's computing launches
+    (`compute`, which ends with `enqueue`) and its copies as one graph."""
+
+    def __init__(self, maps: wp.array, compute):
+        self.maps, self.compute = maps, compute
+        self.magnitude = wp.empty(maps.shape[1], dtype=wp.float32, device=maps.device)
+        self._sets: list[_HostSet] = []
+        self._spare: _HostSet | None = None
 
     def enqueue(self) -> None:
-        """Launch the float32 conversion and the copies (in stream order, inside a capture)."""
+        """Launch the float32 conversion of the magnitude (the last of `compute`'s launches)."""
         wp.launch(fsk_kernels.magnitude_to_float32, dim=self.magnitude.shape[0], inputs=[self.maps, self.magnitude],
                   device=self.maps.device)
-        for r, host in enumerate(self.hosts):
-            wp.copy(host, self.magnitude if r == 1 else self.maps[r])
 
-    def take(self, shape) -> list[np.ndarray]:
-        """Host copies of the rows, each reshaped to `shape` (after the device finished)."""
-        return [v.reshape(shape).copy() for v in self.views]
+    def next_set(self) -> _HostSet:
+        """The set the next frame's maps go to: a free lent set (made, and captured, on first need), else the
+        spare. Asked for before the frame's launches."""
+        for host_set in self._sets:
+            if host_set.free:
+                return host_set
+        if len(self._sets) < LENT_SETS:
+            self._sets.append(_HostSet(self.maps, self.magnitude, self.compute))
+            return self._sets[-1]
+        if self._spare is None:
+            self._spare = _HostSet(self.maps, self.magnitude, self.compute)
+        return self._spare
+
+    def take(self, host_set: _HostSet, shape) -> list[np.ndarray]:
+        """The rows of `host_set` (after the device finished its launch), each of `shape`: lent, or copies of the
+        spare's."""
+        if host_set is self._spare:
+            return [v.reshape(shape).copy() for v in host_set.views]
+        return host_set.lend(shape)
 
 
 class MedianOffset:
@@ -185,32 +281,7 @@ class MedianOffset:
                   inputs=[count, self.n_kept, self.prefix, self.lo_m, self.width_m, points, self.offset], device=dev)
 
 
-class CapturedLaunches:
-    """A fixed sequence of copies and launches on fixed buffers (`_enqueue`, defined by the subclass), captured once
-    as a CUDA graph and replayed per frame; Warp-CPU has no graphs, so there it is issued anew each time."""
-
-    device: wp.Device
-    graph = None
-
-    def _enqueue(self) -> None:
-        raise NotImplementedError
-
-    def _capture(self) -> None:
-        if not self.device.is_cpu:
-            with wp.ScopedCapture(device=self.device) as capture:
-                self._enqueue()
-            self.graph = capture.graph
-
-    def _replay(self) -> None:
-        """Run the sequence once and wait for the device."""
-        if self.graph is not None:
-            wp.capture_launch(self.graph)
-        else:
-            self._enqueue()
-        wp.synchronize_device(self.device)
-
-
-class FrameGraph(CapturedLaunches):
+class FrameGraph:
     """The buffers and launches of one setting (module doc); `run(depth, signal)` computes a frame. `coarse`:
     MM-3FSK's coarse pair (indices into three ascending `freqs_hz`), None for MM-2FSK's two frequencies."""
 
@@ -240,7 +311,7 @@ class FrameGraph(CapturedLaunches):
         self.points = wp.zeros(n_px, dtype=wp.vec3d, device=dev)          # unused slots: finite points
         self.pixel = wp.zeros(n_px, dtype=wp.int32, device=dev)
         self.maps = wp.empty((3, n_px), dtype=wp.float64, device=dev)
-        self.maps_back = HostMaps(self.maps)
+        self.maps_back = HostMaps(self.maps, self._enqueue_frame)
         self.coarse = None if coarse is None else list(coarse)
         pair_hz = freqs_hz if coarse is None else freqs_hz[self.coarse]
         self.correlator = GraphCorrelator(dev, n_px, pair_hz, tx_m, rx_m)
@@ -266,11 +337,20 @@ class FrameGraph(CapturedLaunches):
         if coarse is not None:
             self.median = MedianOffset(dev, n_px, self.m_per_rad)
         self.keep_ratio = float(keep_ratio)
-        self._roi_all = False                                   # whether roi_host holds all ones
-        self._capture()
+        self._roi_from = (None, False)      # (weak reference to the read-only mask staged, whether all ones are)
+        # the samples' correlator whose staged samples are checked for NaN/Inf (MM-3FSK's fine one holds all three)
+        self.checked = self.correlator if coarse is None else self.fine_correlator
+        self.prior_graph = _captured(dev, self._enqueue_prior)
 
-    def _enqueue(self) -> None:
-        """Every copy and launch of a frame, in stream order (captured once on CUDA; issued per frame on Warp-CPU)."""
+    def _roi_staged(self, roi_pixels: np.ndarray | None) -> bool:
+        """Whether roi_host already holds this ROI: all ones, or this very read-only mask (the API's cached ROI, the
+        same array on every frame of a setting)."""
+        ref, all_ones = self._roi_from
+        return all_ones if roi_pixels is None else (ref is not None and ref() is roi_pixels)
+
+    def _enqueue_prior(self) -> None:
+        """A frame's prior, in stream order (captured once on CUDA; issued per frame on Warp-CPU): the depth image,
+        mask and ROI copied in, rasterised, filled and its covered pixels compacted into slots."""
         dev = self.device
         ny, nx = self.shape
         n_px = ny * nx
@@ -278,11 +358,7 @@ class FrameGraph(CapturedLaunches):
         wp.copy(self.d_img, self.depth_host)
         wp.copy(self.m_img, self.mask_host)
         wp.copy(self.roi, self.roi_host)
-        self.correlator.enqueue_tables()
-        if self.coarse is not None:           # the fine pass's samples and tables (on CUDA built here, not on the host)
-            self.fine_correlator.enqueue_tables()
         self.slot.zero_()
-        self.shards.zero_()
         wp.launch(prior_kernels.clear_zbuffer, dim=n_px, inputs=[ny, self.zbuf, self.stats], device=dev)
         wp.launch(prior_kernels.raster_camera_quads, dim=(height - 1) * (width - 1),
                   inputs=[self.d_img, self.m_img, self.use_mask, self.cam, self.xf, self.max_jump, ny, nx,
@@ -293,6 +369,17 @@ class FrameGraph(CapturedLaunches):
         wp.launch(fsk_kernels.compact_covered_pixels, dim=n_px,
                   inputs=[nx, self.filled, self.x_m, self.y_m, self.slot, self.points, self.pixel, self.maps, 1,
                           self.roi], device=dev)
+
+    def _enqueue_frame(self) -> None:
+        """The rest of a frame after its prior: the staged samples copied in (and checked), the tables, the
+        correlation at the prior, depth and filter, and the small results copied out."""
+        dev = self.device
+        ny, nx = self.shape
+        n_px = ny * nx
+        self.correlator.enqueue_tables(check=self.coarse is None)
+        if self.coarse is not None:           # the fine pass's samples and tables (on CUDA built here, not on the host)
+            self.fine_correlator.enqueue_tables(check=True)
+        self.shards.zero_()
         ph = self.correlator.enqueue(self.points, self.slot)
         if self.coarse is None:
             wp.launch(fsk_kernels.depth_at_prior_counted, dim=n_px,
@@ -324,26 +411,35 @@ class FrameGraph(CapturedLaunches):
                   inputs=[fine, self.pixel, self.slot, self.centred, float(C_M_PER_S / (4.0 * np.pi)), self.points,
                           self.maps, self.shards], device=dev)
 
-    def run(self, depth, signal: np.ndarray, roi_pixels: np.ndarray | None = None
+    def run(self, depth, signal: np.ndarray | FrameSamples, roi_pixels: np.ndarray | None = None
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
         """(depth_m, magnitude (float32), prior_m) (ny, nx) NaN where none, the prior's covered pixels and those
         correlated (inside `roi_pixels` (ny, nx) bool, None = all) of a new frame: its depth frame (the setting's
-        size) and samples (n_rx, n_tx, F) at the setting's frequencies. With a coarse pair, `offset_m` then holds the
-        frame's prior offset (m)."""
-        if roi_pixels is not None or not self._roi_all:        # all ones stays staged from the last such frame
+        size) and samples (n_rx, n_tx, F) at the setting's frequencies (a FrameSamples is gathered from its frame
+        while the device builds the prior, and marked `checked`). NaN or Inf samples raise NonFiniteSignal. With a
+        coarse pair, `offset_m` then holds the frame's prior offset (m). The maps are lent (`HostMaps`)."""
+        out = self.maps_back.next_set()
+        if not self._roi_staged(roi_pixels):
             np.copyto(self.roi_view, 1 if roi_pixels is None else roi_pixels.ravel(), casting="unsafe")
-            self._roi_all = roi_pixels is None
+            self._roi_from = (None if roi_pixels is None or roi_pixels.flags.writeable
+                              else weakref.ref(roi_pixels), roi_pixels is None)
         np.copyto(self.depth_view, depth.depth_mm, casting="unsafe")
         if self.use_mask:                                       # a bool mask's bytes are the 0/1 staged: a memcpy
             mask = depth.mask
             np.copyto(self.mask_view, mask.view(np.uint8) if mask.dtype == np.bool_ else mask, casting="unsafe")
+        _launch(self.prior_graph, self._enqueue_prior)         # the prior runs while the host gathers the samples
         if self.coarse is None:
             self.correlator.load(signal)
-        else:
-            self.correlator.load(signal, self.coarse)
+        else:                                 # the pair from the three staged ones (not from the frame again)
             self.fine_correlator.load(signal)
-        self._replay()
-        depth_m, magnitude, prior_m = self.maps_back.take(self.shape)
+            self.correlator.load(self.fine_correlator.raw_view, self.coarse)
+        out.launch()                          # the rest of the frame and the copies into `out`
+        wp.synchronize_device(self.device)
+        if self.checked.nonfinite_staged():
+            raise NonFiniteSignal("the radar frame has NaN or Inf samples")
+        if isinstance(signal, FrameSamples):
+            signal.checked = True
+        depth_m, magnitude, prior_m = self.maps_back.take(out, self.shape)
         n_covered, n_filled = (int(v) for v in self.stats_view)
         return depth_m, magnitude, prior_m, n_covered + n_filled, int(self.slot_view[0])
 
@@ -368,7 +464,7 @@ def frame_graph(buffers, depth, realsense2radar, grid, max_jump_mm, freqs_hz, tx
     return _GRAPHS[key]
 
 
-class FskGraph(CapturedLaunches):
+class FskGraph:
     """2FSK or 3FSK over a fixed pixel list as one CUDA graph (`warp_backend.fsk.two_pass` / `three_fsk`'s launches
     on fixed buffers): the pair's (2FSK: both frequencies; 3FSK: the coarse pair) pass 1 at the scalar prior,
     the strongest pixel, the refocused pass 2, then 2FSK's pair depth or 3FSK's coarse step, third correlation and
@@ -386,7 +482,7 @@ class FskGraph(CapturedLaunches):
         self.pixel = wp.array(flat_pixels.astype(np.int32), dtype=wp.int32, device=dev)
         self.points = wp.zeros(n, dtype=wp.vec3d, device=dev)
         self.maps = wp.empty((rows, ny * nx), dtype=wp.float64, device=dev)
-        self.maps_back = HostMaps(self.maps)
+        self.maps_back = HostMaps(self.maps, self._enqueue)
         self.scalars = wp.empty(2, dtype=wp.float64, device=dev)
         self.scalars_host = wp.empty(2, dtype=wp.float64, device="cpu", pinned=pinned)
         self.first_peak = wp.empty(1, dtype=wp.float32, device=dev)
@@ -403,7 +499,6 @@ class FskGraph(CapturedLaunches):
         centred_hz = offsets_hz - offsets_hz.mean()
         self.centred = wp.vec3d(*(centred_hz / (centred_hz @ centred_hz))) if three else None
         self.prior_m, self.keep_ratio, self.first_only = float(prior_m), float(keep_ratio), int(first_only)
-        self._capture()
 
     def _first_pass(self) -> None:
         """Clear the outputs, build the tables, pass 1 at the scalar prior and the common guess z1 (scalars; every
@@ -413,9 +508,9 @@ class FskGraph(CapturedLaunches):
         self.first_shards.zero_()
         self.shards.zero_()
         self.ref.fill_(2147483647)
-        self.pair_correlator.enqueue_tables()
+        self.pair_correlator.enqueue_tables(check=not self.three)
         if self.three:
-            self.all_correlator.enqueue_tables()
+            self.all_correlator.enqueue_tables(check=True)
         wp.launch(fsk_kernels.points_at_depth, dim=n, inputs=[self.pixel, nx, self.x_m, self.y_m, self.prior_m,
                                                               self.points], device=dev)
         # pass 1 needs |c1| everywhere but c2 only at the strongest pixel: the first frequency over every point, then
@@ -449,14 +544,24 @@ class FskGraph(CapturedLaunches):
         self.maps_back.enqueue()
         wp.copy(self.scalars_host, self.scalars)
 
-    def run(self, signal: np.ndarray) -> tuple[list[np.ndarray], tuple[float, int]]:
-        """Maps (depth, magnitude[, coarse depth]) and (z1_m, reference pixel) of a frame."""
-        self.pair_correlator.load(signal, None if self.pair == list(range(signal.shape[2])) else self.pair)
-        if self.three:
+    def run(self, signal: np.ndarray | FrameSamples) -> tuple[list[np.ndarray], tuple[float, int]]:
+        """Maps (depth, magnitude[, coarse depth]) (lent: `HostMaps`) and (z1_m, reference pixel) of a frame's
+        samples (n_rx, n_tx, F) (a FrameSamples is gathered from its frame and marked `checked`); NaN or Inf samples
+        raise NonFiniteSignal."""
+        out = self.maps_back.next_set()
+        if self.three:                        # the pair from the three staged ones (not from the frame again)
             self.all_correlator.load(signal)
-        self._replay()
+            self.pair_correlator.load(self.all_correlator.raw_view, self.pair)
+        else:
+            self.pair_correlator.load(signal, None if self.pair == list(range(signal.shape[2])) else self.pair)
+        out.launch()                          # the whole frame and the copies into `out`
+        wp.synchronize_device(self.device)
+        if (self.all_correlator if self.three else self.pair_correlator).nonfinite_staged():
+            raise NonFiniteSignal("the radar frame has NaN or Inf samples")
+        if isinstance(signal, FrameSamples):
+            signal.checked = True
         z1_m, ref = self.scalars_host.numpy()
-        return self.maps_back.take(self.shape), (float(z1_m), int(ref))
+        return self.maps_back.take(out, self.shape), (float(z1_m), int(ref))
 
 
 class KeptFskGraph(FskGraph):

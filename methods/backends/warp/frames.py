@@ -178,21 +178,18 @@ class FrameInputs:
         return np.ascontiguousarray(np.concatenate([m, np.zeros(m.shape[:3] + (int(TC2_PAD),), dtype=np.float16)],
                                                    axis=3))
 
-    def _device_tables(self):
-        """(gain (F,) float32, M_h^T (F, 2, 96, TC2_KP) fp16) built on the device from the raw frame (three
-        launches, no host work but the upload of the raw samples)."""
+    def _device_tables(self, split: bool = False):
+        """(gain (F,) float32, operand) built on the device from the raw frame (`table_kernels.launch_tables`, no host
+        work but the upload of the raw samples): M_h^T (F, 2, 96, TC2_KP) fp16, or with `split` its hi/lo parts
+        (F, 4, 96, TC2_KP)."""
         def build():
             dev = self.device
-            raw = self.raw_device
-            gain_raw = wp.zeros(self.n_freqs, dtype=wp.float32, device=dev)
+            gain_raw = wp.empty(self.n_freqs, dtype=wp.float32, device=dev)
             gain = wp.empty(self.n_freqs, dtype=wp.float32, device=dev)
-            mat_h = wp.empty((self.n_freqs, 2, int(TC_ANT), int(TC2_KP)), dtype=wp.float16, device=dev)
-            scale = wp.float32(self.scale)
-            table_kernels.launch_signal_gain(raw, scale, gain_raw, dev)
-            wp.launch(table_kernels.tx_half_table, dim=mat_h.shape, inputs=[raw, scale, gain_raw, gain, mat_h],
-                      device=dev)
-            return gain, mat_h
-        return self._get("device_tables", build)
+            mat = wp.empty((self.n_freqs, 4 if split else 2, int(TC_ANT), int(TC2_KP)), dtype=wp.float16, device=dev)
+            table_kernels.launch_tables(self.raw_device, wp.float32(self.scale), gain_raw, gain, mat, dev)
+            return gain, mat
+        return self._get("split_tables" if split else "device_tables", build)
 
     def tx_half_tables(self):
         """The operand M_h^T of `correlate_tiles_tx_halves` (see `host_tx_half_tables`), built on the device."""
@@ -201,17 +198,7 @@ class FrameInputs:
     def tx_split_tables(self):
         """(gain (F,) float32, (F, 4, 96, TC2_KP) fp16): the split operand of `correlate_tiles_tx_split` (kernel
         "tc3"), built on the device from the raw frame (`table_kernels.tx_split_table`)."""
-        def build():
-            dev = self.device
-            gain_raw = wp.zeros(self.n_freqs, dtype=wp.float32, device=dev)
-            gain = wp.empty(self.n_freqs, dtype=wp.float32, device=dev)
-            mat_hl = wp.empty((self.n_freqs, 4, int(TC_ANT), int(TC2_KP)), dtype=wp.float16, device=dev)
-            scale = wp.float32(self.scale)
-            table_kernels.launch_signal_gain(self.raw_device, scale, gain_raw, dev)
-            wp.launch(table_kernels.tx_split_table, dim=mat_hl.shape, inputs=[self.raw_device, scale, gain_raw, gain,
-                                                                                mat_hl], device=dev)
-            return gain, mat_hl
-        return self._get("split_tables", build)
+        return self._device_tables(split=True)
 
 
 class FrameCache:

@@ -159,7 +159,7 @@ def test_clean_timings_never_reuse_a_parallel_row(synth_root, tmp_path, monkeypa
     In-process with a fixed code version: other work in this tree must not change the store keys meanwhile."""
     monkeypatch.setattr("bench.harness.app.code_version", lambda: "0.1.0+fixed")
     monkeypatch.setattr("bench.harness.app.machine_load", lambda: 0.0)      # a quiet machine: 'alone' stays
-    monkeypatch.setattr("bench.harness.app.busy_cpu_s", lambda: 0.0)        # no other process on the cores
+    monkeypatch.setattr("bench.harness.sizing.busy_cpu_s", lambda: 0.0)     # no other process on the cores
     overrides = ["dataset=maroon", f"dataset.root={synth_root}", "dataset.captures=[01_plate/30]", "method=2fsk",
                  "freq=d05", "prior=none", f"store.dir={tmp_path / 'store'}"]
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):

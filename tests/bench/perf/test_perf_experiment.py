@@ -14,6 +14,7 @@ def test_an_experiment_is_timed_by_stage_cold_then_with_the_ground_truth_kept(sy
         assert row["other_s"] == pytest.approx(row["wall_s"] - spent)
         assert row["methods_s"] >= row["method_runtime_s"] > 0 and row["metrics_s"] > 0
         assert row["composition_s"] > 0 and row["imports_s"] > 0 and row["reading_s"] > 0
+        assert row["launch_s"] > 0 and 0 < row["outside_s"] < row["other_s"]   # the launcher's per-job set-up
     assert cold["ground_truth_s"] > 0 and kept["ground_truth_s"] > 0
 
 

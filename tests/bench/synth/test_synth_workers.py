@@ -74,20 +74,20 @@ def test_a_failing_part_leaves_no_temp_folder_and_no_manifest_entry(tmp_path, mo
 
 
 def test_processes_only_where_a_worker_may_import_the_main_module_again(monkeypatch):
-    monkeypatch.setattr(workers, "cores", lambda: 16)
+    monkeypatch.setattr(workers, "usable_cores", lambda: 16)
     for main, expected in [(types.SimpleNamespace(__spec__=types.SimpleNamespace(name="bench.synth.__main__"),
                                                   __file__="/x/bench/synth/__main__.py"), True),   # python -m
                            (types.SimpleNamespace(__spec__=None), True),                              # python -c
                            (types.SimpleNamespace(__spec__=None, __file__="/x/script.py"), False)]:   # a script
         monkeypatch.setitem(__import__("sys").modules, "__main__", main)
         assert workers.capture_processes() is expected
-    monkeypatch.setattr(workers, "cores", lambda: 2)
+    monkeypatch.setattr(workers, "usable_cores", lambda: 2)
     assert workers.capture_processes() is False
 
 
 def test_threads_where_the_machine_has_no_semaphores_for_worker_processes(monkeypatch):
     """No writable /dev/shm (some containers): a pool's locks cannot be made, so the parts are built in threads."""
-    monkeypatch.setattr(workers, "cores", lambda: 16)
+    monkeypatch.setattr(workers, "usable_cores", lambda: 16)
     monkeypatch.setitem(__import__("sys").modules, "__main__", types.SimpleNamespace(__spec__=None))
     workers._semaphores_work.cache_clear()
     assert workers.capture_processes() is True

@@ -192,3 +192,103 @@ def test_fsk_graph_with_the_keep_skip_equals_the_host_driven_skip(device, freq, 
     if device == CUDA:
         assert via_reconstruct.extra["roi_px"] == evaluated
         assert np.array_equal(np.isfinite(via_reconstruct.depth_m), valid)
+
+
+def _graph_and_frames(device, n_frames: int):
+    """An MM-2FSK frame graph of the test setting and `n_frames` fresh (depth frame, samples) of a tilted plane."""
+    from methods.backends.warp.frame_graph import frame_graph
+
+    backend, rng, cam2radar, grid, freqs_hz, (rows, cols) = _mm2fsk_setting(device)
+    frames = []
+    for _ in range(n_frames):
+        z0 = rng.uniform(0.28, 0.34)
+        depth = plane_depth_frame(z0, rng.uniform(-0.2, 0.2), 0.0, cam2radar,
+                                  mask=(cols - 320) ** 2 + (rows - 240) ** 2 < 150 ** 2)
+        points = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), np.full(40, z0)])
+        frames.append((depth, simulate(points, np.exp(2j * np.pi * rng.random(40)), freqs_hz)))
+    graph = frame_graph(backend.buffers, frames[0][0], cam2radar, grid, 10.0, freqs_hz, ANTENNAS.tx_m, ANTENNAS.rx_m,
+                        10.0 ** (-14.0 / 20.0))
+    return graph, frames
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_lent_maps_survive_later_frames_and_their_buffers_come_back_once_dropped(device):
+    """The graph hands out its host buffers without copying them (`HostMaps`): maps the caller keeps (or only a view
+    of) are never overwritten by later frames, even after the graph itself is dropped; once dropped, a set is lent
+    again; with every set held, the maps are copies."""
+    import gc
+
+    from methods.backends.warp import frame_graph as fg
+
+    graph, frames = _graph_and_frames(device, fg.LENT_SETS + 3)
+    first = graph.run(*frames[0])[:3]
+    kept = [m.copy() for m in first]
+    view = first[0][5:-5:2]                          # only a view of the first depth map stays alive
+    kept_view = view.copy()
+    address = first[0].__array_interface__["data"][0]
+    assert not first[0].flags.owndata and np.isfinite(first[0]).sum() > 100
+    later = [graph.run(*frame)[:3] for frame in frames[1:fg.LENT_SETS]]
+    for maps in later:                               # a set of its own each: the first maps are intact
+        assert all(m.__array_interface__["data"][0] != address for m in maps)
+    assert all(np.array_equal(m, k, equal_nan=True) for m, k in zip(first, kept, strict=True))
+    held = later + [first]
+    copies = graph.run(*frames[fg.LENT_SETS])[:3]     # every set lent: copies
+    assert all(m.flags.owndata for m in copies)
+    del first, held, later, copies
+    assert np.array_equal(view, kept_view, equal_nan=True)
+    again = graph.run(*frames[fg.LENT_SETS + 1])[0]  # a dropped set is lent again, not the view's
+    assert not again.flags.owndata and again.__array_interface__["data"][0] != address
+    del again
+    fg._GRAPHS.clear()                               # the graph and its buffers dropped: the view keeps its memory
+    del graph
+    gc.collect()
+    other, frames = _graph_and_frames(device, 2)
+    for frame in frames:
+        other.run(*frame)
+    assert np.array_equal(view, kept_view, equal_nan=True)
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_the_graph_gathers_frame_samples_and_refuses_nan_ones(device):
+    """A FrameSamples (the frame's samples at the pair's frequencies among others) is gathered by the graph itself:
+    the same maps as from the taken array, and marked checked; a NaN or Inf sample at a used frequency raises
+    NonFiniteSignal, one at an unused frequency does not."""
+    from methods.domain.errors import NonFiniteSignal
+    from methods.domain.samples import FrameSamples
+
+    graph, [(depth, pair)] = _graph_and_frames(device, 1)
+    frame = np.stack([pair[:, :, 0], pair[:, :, 1] * 1j, pair[:, :, 1]], axis=2)     # used: 0 and 2
+    want = [m.copy() for m in graph.run(depth, pair)[:3]]
+    samples = FrameSamples(frame, np.array([0, 2]))
+    got = graph.run(depth, samples)[:3]
+    assert samples.checked and samples.taken is None
+    assert all(np.array_equal(g, w, equal_nan=True) for g, w in zip(got, want, strict=True))
+    frame[7, 3, 1] = np.nan                           # an unused frequency: not looked at
+    assert np.array_equal(graph.run(depth, FrameSamples(frame, np.array([0, 2])))[0], want[0], equal_nan=True)
+    for bad in (np.nan, np.inf):
+        frame[7, 3, 2] = bad
+        samples = FrameSamples(frame, np.array([0, 2]))
+        with pytest.raises(NonFiniteSignal), np.errstate(invalid="ignore"):     # (Warp-CPU's host tables)
+            graph.run(depth, samples)
+        assert not samples.checked
+
+
+@pytest.mark.parametrize("device", ["warp-cpu", CUDA])
+def test_a_staged_roi_is_reused_only_for_the_same_read_only_mask(device):
+    """The graph stages a read-only ROI mask once and reuses it for the same array; another mask, a writable one
+    changed in place, or none restage it: each frame is restricted to its own ROI."""
+    graph, [(depth, signal)] = _graph_and_frames(device, 1)
+    shape = graph.shape
+    left, right = np.zeros(shape, bool), np.zeros(shape, bool)
+    left[:, : shape[1] // 2], right[:, shape[1] // 2:] = True, True
+    for mask in (left, right):
+        mask.flags.writeable = False
+    writable = left.copy()
+    whole = np.isfinite(graph.run(depth, signal)[2])
+    for roi, changed in ((left, None), (left, None), (right, None), (None, None), (writable, None),
+                         (writable, right), (left, None)):
+        if changed is not None:
+            writable[...] = changed
+        depth_m, _, _, _, n_used = graph.run(depth, signal, roi)
+        used = whole if roi is None else whole & roi
+        assert n_used == used.sum() > 20 and not np.isfinite(depth_m[~used]).any()

@@ -39,10 +39,14 @@ def signal_gain(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_raw:
         wp.atomic_max(gain_raw, f, wp.tile_extract(block_max, 0))
 
 
-def launch_signal_gain(signal: wp.array, scale, gain_raw: wp.array, device) -> None:
-    """`signal_gain` over a raw frame (R, T, F) into gain_raw (F,) (zeroed before)."""
+def launch_tables(signal: wp.array, scale, gain_raw: wp.array, gain: wp.array, mat: wp.array, device) -> None:
+    """A raw frame's (R, T, F) tensor-core operand into `mat` and its gains into `gain` (F,): `signal_gain` into
+    gain_raw (F,), then `tx_half_table` for `mat` (F, 2, 96, TC2_KP) or `tx_split_table` for (F, 4, 96, TC2_KP)."""
+    gain_raw.zero_()
     wp.launch_tiled(signal_gain, dim=[signal.shape[2], GAIN_BLOCKS], inputs=[signal, scale, gain_raw],
                     block_dim=GAIN_BLOCK_DIM, device=device)
+    wp.launch(tx_split_table if mat.shape[1] == 4 else tx_half_table, dim=mat.shape,
+              inputs=[signal, scale, gain_raw, gain, mat], device=device)
 
 
 @wp.func
@@ -71,10 +75,14 @@ def table_quotient(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, f: int
 
 
 @wp.func
-def gain_of(gain_raw: wp.array(dtype=wp.float32), f: int) -> wp.float64:
+def table_gain(gain_raw: wp.array(dtype=wp.float32), gain: wp.array(dtype=wp.float32), f: int, first: bool
+               ) -> wp.float64:
+    """Frequency f's gain (1 where its samples are all zero), written to gain[f] by its `first` entry's thread."""
     g = wp.float64(gain_raw[f])
     if g <= wp.float64(0.0):
         g = wp.float64(1.0)
+    if first:
+        gain[f] = wp.float32(g)
     return g
 
 
@@ -83,9 +91,7 @@ def tx_half_table(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_ra
                   gain: wp.array(dtype=wp.float32), mat_h: wp.array4d(dtype=wp.float16)):
     """One fp16 entry (f, h, j, i) of M_h^T (module doc)."""
     f, h, j, i = wp.tid()
-    g = gain_of(gain_raw, f)
-    if h == 0 and j == 0 and i == 0:
-        gain[f] = wp.float32(g)
+    g = table_gain(gain_raw, gain, f, h == 0 and j == 0 and i == 0)
     if i >= TC_K:
         mat_h[f, h, j, i] = wp.float16(0.0)
         return
@@ -98,9 +104,7 @@ def tx_split_table(signal: wp.array3d(dtype=wp.vec2f), scale: wp.float32, gain_r
     """One fp16 entry (f, 2 h + part, j, i) of `correlate_tiles_tx_split`'s operand: part 0 the entry of M_h^T
     (`tx_half_table`'s value), part 1 its residual (quotient - hi) * TC3_SCALE."""
     f, slot, j, i = wp.tid()
-    g = gain_of(gain_raw, f)
-    if slot == 0 and j == 0 and i == 0:
-        gain[f] = wp.float32(g)
+    g = table_gain(gain_raw, gain, f, slot == 0 and j == 0 and i == 0)
     if i >= TC_K:
         mat_hl[f, slot, j, i] = wp.float16(0.0)
         return
