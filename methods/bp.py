@@ -125,7 +125,7 @@ def _host_search_options(skips: SkipSettings, grid, pixels: np.ndarray) -> dict:
         if step_px > 1:
             rows, cols = np.nonzero(pixels)                 # the order of x_img[pixels]
             lattice = bp_search.Lattice(rows, cols, step_px, skips.search_lattice_margin_db,
-                                        skips.search_lattice_weak_db)
+                                        skips.search_lattice_weak_db, skips.search_lattice_recheck_db)
     return {"lattice": lattice, "local_max": skips.search_local_max, "jump": skips.search_vertex_jump}
 
 

@@ -42,6 +42,10 @@ argmax with them, so `bench.perf skips` and docs/measurements/formation.md measu
   own values. The image is laterally smooth over the lattice (2 mm against a lateral resolution of ~4 mm at 30
   cm), so a pixel's peak lies where its corners' peaks are. With `weak_db` >= 0 a pixel whose four corners' coarse
   maxima all lie weak_db below the filter-aware skip level (below) evaluates nothing (depth NaN, magnitude 0).
+  The magnitude is smooth over the lattice but the depth of broad (two-frequency) lobes need not be: a pixel can
+  hold its peak where no corner has a candidate (the catalogue's bottle, formation.md 14). With `recheck_db` >= 0 a
+  pixel whose peak after its search lies more than recheck_db below the mean (dB) of its corners' peaks, where that
+  mean reaches the filter-aware skip level, takes every coarse sample and is searched again, as a lattice pixel.
 * vertex jump (`jump`): a pixel with a single candidate after the coarse samples refines at the vertex of the
   parabola (in dB) through the candidate and its nearest evaluated samples, +- 1 sample, and the climb ends it,
   instead of halving (~3 samples instead of ~6 for a lobe that is smooth over a coarse step, as with few
@@ -71,6 +75,7 @@ Evaluate = Callable[[np.ndarray], np.ndarray]      # points (N, 3) m -> frequenc
 # (x_m, y_m, z_m, step) -> (coarse maximum (N,), its first depth index (N,), samples evaluated), or None: the host
 CoarsePeaks = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], "tuple[np.ndarray, np.ndarray, int] | None"]
 BATCH_POINTS = 1 << 16                             # points per evaluate call (128 frequencies: 64 MB of phasors)
+SMALL_SUBSET = 8                                   # fewer than 1/8 of the pixels: read their rows, not the whole array
 
 
 @dataclass(frozen=True)
@@ -241,13 +246,15 @@ def plan_search(freqs_hz: np.ndarray, antennas: AntennaArray, x_m: np.ndarray, y
 @dataclass(frozen=True)
 class Lattice:
     """The searched pixels' grid rows and columns (N,) and a lattice of `step_px` pixels (module doc): the others
-    inherit their coarse samples from the candidates of their lattice corners within the window + `margin_db`."""
+    inherit their coarse samples from the candidates of their lattice corners within the window + `margin_db`;
+    `weak_db`, `recheck_db` (dB, < 0: off): the module doc's weak corners and re-check."""
 
     rows: np.ndarray
     cols: np.ndarray
     step_px: int
     margin_db: float
     weak_db: float = -1.0
+    recheck_db: float = -1.0
 
     def corners(self) -> tuple[np.ndarray, np.ndarray]:
         """(N, 4) indices of each pixel's enclosing lattice pixels (-1: not in the set) and (N,) bool: the pixel
@@ -269,14 +276,19 @@ def _candidates(mag: np.ndarray, rows: np.ndarray, ratio: np.ndarray, local_max:
     the pixels `rows` (ascending) within `ratio` (len(rows),) of their pixel's maximum and, with `local_max`, no
     smaller than their pixel's nearest evaluated samples on either side (module doc); and the depth indices of
     those nearest evaluated samples (left, right; -1: none). Works on the list of evaluated samples (~25 of a
-    pixel's ~200 depths), found in one pass over `mag` (no copy of the rows)."""
+    pixel's ~200 depths), found in one pass over `mag` (no copy of the rows), or over a copy of the rows where
+    they are few (the re-checked pixels)."""
     n_z = mag.shape[1]
-    flat = np.flatnonzero(mag >= 0)                                            # pixel-major, depth ascending
-    asked = np.zeros(len(mag), dtype=bool)
-    asked[rows] = True
-    flat = flat[asked[flat // n_z]]
-    pixel = flat // n_z
-    vals = mag.ravel()[flat]
+    if SMALL_SUBSET * len(rows) < len(mag):
+        block = mag[rows]
+        flat = np.flatnonzero(block >= 0)                                      # pixel-major, depth ascending
+        pixel, vals = rows[flat // n_z], block.ravel()[flat]
+    else:
+        flat = np.flatnonzero(mag >= 0)
+        asked = np.zeros(len(mag), dtype=bool)
+        asked[rows] = True
+        flat = flat[asked[flat // n_z]]
+        pixel, vals = flat // n_z, mag.ravel()[flat]
     starts = np.flatnonzero(np.concatenate(([True], pixel[1:] != pixel[:-1]))) if len(flat) else flat
     ratio_of = np.zeros(len(mag))
     ratio_of[rows] = ratio
@@ -367,11 +379,10 @@ class _Samples:
             pix = pixels[step[pixels] == s]
             k_c = _coarse_indices(n_z, int(s))
             pp, kk = np.meshgrid(pix, k_c, indexing="ij")     # pixel-major: a batch's points lie close together
-            if self.window is None:
-                self.run(kk.ravel(), pp.ravel())
-            else:
-                inside = (kk >= self.window[0][pp]) & (kk <= self.window[1][pp])
-                self.run(kk[inside], pp[inside])
+            todo = self.mag[pp, kk] < 0                       # not evaluated yet (a re-checked pixel has some)
+            if self.window is not None:
+                todo &= (kk >= self.window[0][pp]) & (kk <= self.window[1][pp])
+            self.run(kk[todo], pp[todo])
             coarse_max[pix] = np.maximum(self.mag[np.ix_(pix, k_c)].max(axis=1), 0.0)
         return coarse_max
 
@@ -433,19 +444,48 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
 
     n_z, n_px = len(z_m), len(x_m)
     dz_m = float(z_m[1] - z_m[0]) if n_z > 1 else 1.0
-    spacing = np.minimum(plan.step, max(n_z - 1, 1))
+    step = np.minimum(plan.step, max(n_z - 1, 1))
     samples = _Samples(evaluate, x_m, y_m, z_m, z_window, known)
-    window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)                     # (N,)
-    if lattice is not None and lattice.step_px > 1:
-        samples.run_inherited(spacing, window, lattice, local_max,
-                              None if threshold_db is None else 10.0 ** (-threshold_db / 20.0))
+    window = 10.0 ** (-plan.candidate_db(step) / 20.0)                        # (N,)
+    keep_ratio = None if threshold_db is None else 10.0 ** (-threshold_db / 20.0)
+    on_lattice = lattice is not None and lattice.step_px > 1
+    if on_lattice:
+        samples.run_inherited(step, window, lattice, local_max, keep_ratio)
         coarse_max = np.maximum(samples.mag.max(axis=1), 0.0)                  # unevaluated: -1
     else:
-        coarse_max = samples.run_coarse(spacing)
+        coarse_max = samples.run_coarse(step)
     active = coarse_max > 0
-    if threshold_db is not None and active.any():
-        active &= coarse_max >= coarse_max.max() * 10.0 ** (-threshold_db / 20.0) * window
-    spacing = np.where(active, spacing, 1)
+    if keep_ratio is not None and active.any():
+        active &= coarse_max >= coarse_max.max() * keep_ratio * window
+    _refine(samples, plan, np.where(active, step, 1), local_max, jump)
+    _climb(samples, active)
+    if on_lattice and lattice.recheck_db >= 0:
+        level = 0.0 if keep_ratio is None else coarse_max.max() * keep_ratio
+        again = _rechecked(samples.mag, lattice, level * window)
+        if again.any():                              # searched again with every coarse sample, as a lattice pixel
+            pixels = np.flatnonzero(again)
+            coarse_max[pixels] = np.maximum(coarse_max[pixels], samples.run_coarse(step, pixels)[pixels])
+            again &= coarse_max >= level * window
+            active |= again
+            _refine(samples, plan, np.where(again, step, 1), local_max, jump)
+            _climb(samples, again)
+    depth_m = np.full(n_px, np.nan)
+    max_proj = coarse_max.astype(np.float64)
+    if active.any():
+        mag = samples.mag[active].T
+        depth_m[active], max_proj[active] = peak_depth_m(mag, float(z_m[0]), dz_m)
+        k_best = np.argmax(mag, axis=0)
+        on_cut = ((k_best == 0) & (not z_edges_are_grid_edges[0])) | ((k_best == n_z - 1) &
+                                                                       (not z_edges_are_grid_edges[1]))
+        depth_m[np.flatnonzero(active)[on_cut]] = np.nan
+    return SearchResult(depth_m, max_proj, samples.count)
+
+
+def _refine(samples: _Samples, plan: SearchPlan, spacing: np.ndarray, local_max: bool, jump: bool) -> None:
+    """The halving (`search_depth`'s doc) of the pixels whose coarse `spacing` (N,) is > 1 (the others: 1), from the
+    samples evaluated so far; with `jump`, a pixel's single candidate of the first level jumps to its lobe's vertex."""
+    n_px, n_z = samples.mag.shape
+    window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)
     first = True
     while (spacing > 1).any():
         refining = np.flatnonzero(spacing > 1)
@@ -468,24 +508,28 @@ def search_depth(evaluate: Evaluate, x_m: np.ndarray, y_m: np.ndarray, z_m: np.n
         key = _unique(p_new[fresh].astype(np.int64) * n_z + k_new[fresh])       # pixel-major, no duplicates
         samples.run(key % n_z, key // n_z)
         window = 10.0 ** (-plan.candidate_db(spacing) / 20.0)
-    _climb(samples, active)
-    depth_m = np.full(n_px, np.nan)
-    max_proj = coarse_max.astype(np.float64)
-    if active.any():
-        mag = samples.mag[active].T
-        depth_m[active], max_proj[active] = peak_depth_m(mag, float(z_m[0]), dz_m)
-        k_best = np.argmax(mag, axis=0)
-        on_cut = ((k_best == 0) & (not z_edges_are_grid_edges[0])) | ((k_best == n_z - 1) &
-                                                                       (not z_edges_are_grid_edges[1]))
-        depth_m[np.flatnonzero(active)[on_cut]] = np.nan
-    return SearchResult(depth_m, max_proj, samples.count)
+
+
+def _rechecked(mag: np.ndarray, lattice: Lattice, level: np.ndarray) -> np.ndarray:
+    """(N,) bool: the pixels that took their coarse samples from their lattice corners and whose peak so far lies
+    more than `lattice.recheck_db` below the mean (in dB) of their corners' peaks, where that mean reaches `level`
+    (N,) (the filter-aware skip level: below it the pixel cannot matter to the filter)."""
+    corners, own = lattice.corners()
+    peak_db = 20.0 * np.log10(np.maximum(mag.max(axis=1), 1e-30).astype(np.float64))
+    inherit = np.flatnonzero(~own)
+    corner_db = peak_db[corners[inherit]].mean(axis=1)
+    out = np.zeros(len(mag), dtype=bool)
+    out[inherit] = ((peak_db[inherit] < corner_db - lattice.recheck_db)
+                    & (corner_db >= 20.0 * np.log10(np.maximum(level[inherit], 1e-30))))
+    return out
 
 
 def _climb(samples: _Samples, active: np.ndarray) -> None:
     """Evaluate unevaluated neighbours of each active pixel's argmax until none is left."""
     n_z = samples.mag.shape[1]
     pixels = np.flatnonzero(active)
-    k_all = np.argmax(samples.mag, axis=1)                 # the first round's: no copy of most of the rows
+    # the first round's: no copy of most of the rows (a few rows, the re-checked pixels: their copy)
+    k_all = None if SMALL_SUBSET * len(pixels) < len(samples.mag) else np.argmax(samples.mag, axis=1)
     for _ in range(n_z):
         if len(pixels) == 0:
             return

@@ -22,8 +22,10 @@ numbers).
   search runs on the host, its measured shortcuts (bp_search's module doc): candidates only at local maxima
   (`search_local_max`) and the coarse samples of every pixel only on a `search_lattice_step_m` pixel lattice, the
   other pixels' near their lattice corners' candidates (0: off) and, where all four corners lie
-  `search_lattice_weak_db` below the filter's skip level, nowhere; with `search_vertex_jump` (few frequencies) a
-  pixel with one coarse candidate refines at its lobe's parabola vertex; with `search_local_z` (and the coarse ROI)
+  `search_lattice_weak_db` below the filter's skip level, nowhere; an other pixel whose peak then lies
+  `search_lattice_recheck_db` below its corners' (mean in dB) takes every coarse sample and is searched again;
+  with `search_vertex_jump` (few frequencies) a pixel with one coarse candidate refines at its lobe's parabola
+  vertex; with `search_local_z` (and the coarse ROI)
   each pixel's coarse samples only within the depths of the coarse ROI's lattice pixels that marked it (their peaks +-
   the ROI's depth pad, + `search_local_z_pad_m`), not the ROI's whole depth range.
 * `bp_range_cpu`: BP with many frequencies on the CPU gathers from range-compressed profiles
@@ -75,6 +77,8 @@ class SkipSettings:
     search_local_max: bool = True     # ... that are local maxima among the pixel's evaluated samples (host search)
     search_lattice_step_m: float = 0.002  # coarse samples at every pixel of a 2 mm lattice only (host search) ...
     search_lattice_margin_db: float = 1.0  # ... the others' near their corners' candidates within the window + 1 dB
+    search_lattice_recheck_db: float = 2.0  # ... searched again with every coarse sample where their peak lies this
+    #                                         far below their corners' mean in dB (< 0: off)
     search_lattice_weak_db: float = 3.0  # ... and nowhere where all four corners lie this far below the
     #                                      filter's skip level (< 0: off)
     search_vertex_jump: bool = False  # (host search) a pixel with one coarse candidate refines at the vertex of the

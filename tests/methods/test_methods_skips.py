@@ -227,12 +227,13 @@ def test_coarse_to_fine_misses_a_peak_when_the_condition_fails():
     assert found.depth_m[0] == full.depth_m[0]
 
 
-def test_candidates_match_a_plain_loop(record_property):
+@pytest.mark.parametrize("n_rows", [20, 3])          # most pixels, or a few (read through a copy of their rows)
+def test_candidates_match_a_plain_loop(n_rows, record_property):
     rng = fresh_rng(record_property)
     mag = np.where(rng.random((30, 40)) < 0.3, rng.random((30, 40)), -1.0).astype(np.float32)   # (pixels, depths)
     mag[rng.random(30) < 0.2] = -1.0                                   # pixels without an evaluated sample
-    rows = np.sort(rng.choice(30, size=20, replace=False))             # the pixels asked about
-    ratio = rng.uniform(0.2, 1.0, 20)
+    rows = np.sort(rng.choice(30, size=n_rows, replace=False))         # the pixels asked about
+    ratio = rng.uniform(0.2, 1.0, n_rows)
     ratio[0] = 1.0                                                     # a window of 0 dB
     for local_max in (False, True):
         want = []
@@ -300,6 +301,45 @@ def test_pixel_lattice_inherits_the_peaks_of_laterally_smooth_profiles(record_pr
     assert fast.n_evaluated < 0.8 * full.n_evaluated
     corners, own = lattice.corners()
     assert own.sum() == 12 * 12 + 2 * 24 - 1 and (corners[~own] >= 0).all()   # lattice + last row and column
+
+
+def test_lattice_pixels_whose_peak_no_corner_holds_are_searched_again(record_property):
+    # the bottle's lost pixels (formation.md 14): the magnitude is laterally smooth over the 2 mm lattice but the
+    # depth of broad two-frequency lobes is not, so a pixel between lattice pixels can hold its peak where none of
+    # its corners has a candidate. Here every pixel has lobe A (1 cm wide) at the lattice pixels' depth and a random
+    # third of the other pixels a stronger lobe B 3-5 cm deeper, which the lattice pixels hold 20 dB down; their A
+    # lies 4-26 dB below their corners', some below the filter's skip level. Without the re-check the inherited
+    # samples find A (a wrong depth) or nothing (a lost pixel); with it those pixels take every coarse sample and
+    # the depths are the full grid's, for about one lattice pixel's samples each
+    rng = fresh_rng(record_property)
+    n_side, width_m, dz_m, step = 20, 0.010, 0.001, 7
+    rows, cols = np.divmod(np.arange(n_side * n_side), n_side)
+    n_px = len(rows)
+    inherits = ((rows % 2 + cols % 2) > 0) & (rows < n_side - 1) & (cols < n_side - 1)   # four corners in the set
+    hidden = inherits & (rng.random(n_px) < 1 / 3)
+    z_a = rng.uniform(0.26, 0.28)
+    centres = np.stack([np.full(n_px, z_a), np.full(n_px, z_a + rng.uniform(0.03, 0.05))], axis=1)
+    amplitudes = np.stack([np.where(hidden, rng.uniform(0.05, 0.6, n_px), rng.uniform(0.9, 1.0, n_px)),
+                           np.where(hidden, rng.uniform(0.7, 0.95, n_px), 0.1)], axis=1)
+    evaluate = _gaussian_profiles(centres, amplitudes, width_m)
+    z_m = np.arange(0.25, 0.35 + 1e-9, dz_m)
+    loss_db = 20 * np.log10(np.e) * (np.arange(1, step + 1) * dz_m / 2) ** 2 / (2 * width_m ** 2)
+    plan = SearchPlan.uniform(n_px, step, loss_db, margin_db=1.0)
+    x = np.arange(n_px, dtype=float)
+    full = search_depth(evaluate, x, x * 0, z_m, SearchPlan.every_sample(n_px), 6.0)
+    full_m = filter_depth(full.depth_m, full.max_projection, 6.0)
+    assert np.isfinite(full_m[hidden]).all() and np.all(np.abs(full_m[hidden] - centres[hidden, 1]) < dz_m)
+    found = {}
+    for recheck_db in (-1.0, 2.0):
+        lattice = bp_search.Lattice(rows, cols, 2, 1.0, recheck_db=recheck_db)
+        found[recheck_db] = search_depth(evaluate, x, x * 0, z_m, plan, 6.0, lattice=lattice, local_max=True)
+    before, after = (filter_depth(r.depth_m, r.max_projection, 6.0) for r in found.values())
+    wrong = ~np.isclose(before, full_m, rtol=0, atol=1e-9, equal_nan=True)
+    assert wrong[hidden].all() and not wrong[~hidden].any()                        # the shortcut alone misses B
+    assert (~np.isfinite(before[hidden])).any() and np.isfinite(before[hidden]).any()   # lost and moved pixels
+    same(after, full_m)
+    coarse = len(bp_search._coarse_indices(len(z_m), step))
+    assert found[2.0].n_evaluated - found[-1.0].n_evaluated < hidden.sum() * (coarse + 12)
 
 
 def _blob_scene(rng, n_side: int = 61, pitch_m: float = 0.001):

@@ -7,7 +7,9 @@ variant: median time, speed-up over the full computation, the pixels evaluated, 
 share of the pixels valid in both that agree within 0.1 mm, valid pixels gained and lost) and of each metric
 (C_g, C_s, P, P_e on the capture's metric grid after resampling, metrics.evaluate), and whether the variant meets
 the rule for being on by default: depth within 0.1 mm on >= 99 % of the pixels valid in both, every metric within
-1 % (relative; within 0.001 cm where the full value is below 0.1 cm).
+1 % (relative; within 0.001 cm where the full value is below 0.1 cm). `agree_either_pct` counts the pixels valid in
+either map, a pixel valid in one only as not within 0.1 mm (issue 30's reading of "the pixels that pass -14 dB":
+a pixel the skip loses or gains is a depth it got wrong).
 
 Variants: `alone` (each skip alone; `auto` and `all` together), or `--mode leave-one-out` (the default skips with
 one flipped: `auto-X` without a default skip X, `auto+X` with a skip X that is off by default; attributes each
@@ -50,7 +52,8 @@ APPLIES = {"bp": ("mask_bb", "mask_bb_depth", "coarse_roi", "bp_coarse_to_fine",
            "2fsk": ("mask_bb", "mask_bb_depth", "fsk_keep"), "3fsk": ("mask_bb", "mask_bb_depth", "fsk_keep"),
            "mm2fsk": ("mask_bb", "mask_bb_depth")}
 CSV_COLUMNS = ["object", "distance", "cell", "grid", "variant", "median_ms", "full_ms", "full_timing", "speedup",
-               "roi_px", "evaluated", "valid_full", "valid_skip", "valid_both", "agree_0p1mm_pct", "max_diff_mm",
+               "roi_px", "evaluated", "valid_full", "valid_skip", "valid_both", "agree_0p1mm_pct", "agree_either_pct",
+               "max_diff_mm",
                *[f"{m}_full" for m in METRICS], *[f"{m}_skip" for m in METRICS], *[f"{m}_rel_pct" for m in METRICS],
                "meets_rule", "reference", "device", "hostname"]
 
@@ -63,6 +66,7 @@ class Comparison:
     valid_skip: int
     valid_both: int
     agree_pct: float
+    agree_either_pct: float          # of the pixels valid in either map; valid in one only: not within
     max_diff_mm: float
     metrics_full: dict
     metrics_skip: dict
@@ -94,6 +98,8 @@ def compare(full_m: np.ndarray, skip_m: np.ndarray, scores_full: dict, scores_sk
     both = valid_full & valid_skip
     diff = np.abs(full_m[both] - skip_m[both])
     agree = 100.0 * float(np.mean(diff <= DEPTH_TOL_M)) if both.any() else float("nan")
+    either = int((valid_full | valid_skip).sum())
+    agree_either = 100.0 * int((diff <= DEPTH_TOL_M).sum()) / either if either else float("nan")
     rel = {}
     for m in METRICS:
         a, b = float(scores_full[m]), float(scores_skip[m])
@@ -104,7 +110,7 @@ def compare(full_m: np.ndarray, skip_m: np.ndarray, scores_full: dict, scores_sk
         else:
             rel[m] = 100.0 * abs(b - a) / abs(a)
     meets = (not both.any() or agree >= 100.0 * AGREE_SHARE) and all(v <= 100.0 * METRIC_REL_TOL for v in rel.values())
-    return Comparison(int(valid_full.sum()), int(valid_skip.sum()), int(both.sum()), agree,
+    return Comparison(int(valid_full.sum()), int(valid_skip.sum()), int(both.sum()), agree, agree_either,
                       float(diff.max() * 1e3) if both.any() else float("nan"),
                       {m: scores_full[m] for m in METRICS}, {m: scores_skip[m] for m in METRICS}, rel, bool(meets))
 
@@ -190,14 +196,15 @@ def measure_cell(capture, gt, cell: str, grid_name: str, device: str, repeat: in
                "speedup": full_ms / median_ms, "roi_px": rec.extra.get("roi_px"),
                "evaluated": rec.extra.get("evaluated_voxels", rec.extra.get("roi_px")),
                "valid_full": c.valid_full, "valid_skip": c.valid_skip, "valid_both": c.valid_both,
-               "agree_0p1mm_pct": c.agree_pct, "max_diff_mm": c.max_diff_mm,
+               "agree_0p1mm_pct": c.agree_pct, "agree_either_pct": c.agree_either_pct, "max_diff_mm": c.max_diff_mm,
                **{f"{m}_full": c.metrics_full[m] for m in METRICS}, **{f"{m}_skip": c.metrics_skip[m] for m in METRICS},
                **{f"{m}_rel_pct": c.rel_pct[m] for m in METRICS}, "meets_rule": c.meets_rule,
                "reference": "file" if ref_file is not None and ref_file.exists() else "computed",
                "device": device, "hostname": socket.gethostname()}
         rows.append(row)
         log(f"{capture.object_name:16s} {cell:13s} {name:20s} {median_ms:10.0f} ms  full {full_ms:10.0f} ms "
-            f"x{row['speedup']:6.1f}  agree {c.agree_pct:6.2f} % of {c.valid_both:6d}  valid {c.valid_full}->"
+            f"x{row['speedup']:6.1f}  agree {c.agree_pct:7.3f} % of {c.valid_both:6d} ({c.agree_either_pct:7.3f} % of "
+            f"either)  valid {c.valid_full}->"
             f"{c.valid_skip}  metrics max {max(c.rel_pct.values()):6.2f} %  {'ok' if c.meets_rule else 'NO'}")
     return rows
 
