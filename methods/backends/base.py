@@ -63,13 +63,14 @@ class Backend:
     #: with `device_fsk`: the `fsk_keep` skip also runs on the device (`keep` of fsk_two_pass / fsk_three)
     keeps_on_device = False
 
-    def checks_samples(self, signal: np.ndarray) -> bool:
-        """Whether this backend checks `signal` for NaN/Inf samples itself where it uploads them (raising
-        `NonFiniteSignal`), so that the caller need not; then `samples_checked` says after the run whether it did."""
+    def checks_samples(self, samples) -> bool:
+        """Whether this backend checks `samples` (a methods.domain.samples.FrameSamples, or an array (n_rx, n_tx, F))
+        for NaN/Inf itself where it stages them (raising `NonFiniteSignal`), so that the caller need not; then
+        `samples_checked` says after the run whether it did."""
         return False
 
-    def samples_checked(self, signal: np.ndarray) -> bool:
-        """Whether this very array's samples were checked (and found finite) by this backend."""
+    def samples_checked(self, samples) -> bool:
+        """Whether these very samples were checked (and found finite) by this backend."""
         return False
 
     def correlate(self, signal, freqs_hz, tx_m, rx_m, points_m) -> np.ndarray:
