@@ -6,10 +6,6 @@ machine and 1.7 s on a loaded one, per job and per pass. Here the checked config
 the launcher when it asks for the same overrides, so each job is composed once. Launchers that compose in another
 process (joblib, submitit) compose there as before: the kept configurations are not sent along.
 
-Hydra reads and parses every config file anew for each composition (a new CachingConfigRepository each time:
-about a third of a composition); here the files read by one composition serve the sweep's later ones (`_files_kept`:
-the same search path for every job of a sweep, whose overrides cannot touch `hydra.*`).
-
 A batch of several jobs is composed by forked worker processes, one per core, on machines of at least MIN_CORES
 cores (a composed configuration comes back pickled: ~1.5 ms to read against 60-200 ms to compose): 13 jobs of
 Table III take ~1.2 s one after another on the H100 host's CPU. Where that fails (a composition error, e.g. a typo
@@ -17,7 +13,6 @@ in an override) the batch is composed here, one job after another, and the error
 """
 from __future__ import annotations
 
-import contextlib
 import multiprocessing
 import os
 import pickle
@@ -32,43 +27,16 @@ from bench.harness import stages
 from methods.domain.host import usable_cores
 
 
-@contextlib.contextmanager
-def _files_kept(loader, files: dict):
-    """While open, every composition of `loader` (Hydra's ConfigLoaderImpl) reads its config files through the
-    cache `files` (Hydra's CachingConfigRepository.cache: config path -> parsed file), shared across compositions.
-    Hydra treats what that cache holds as read-only within a composition (a file is loaded once per composition and
-    used wherever it appears). Another loader (a test's) composes as it does."""
-    create = getattr(loader, "_parse_overrides_and_create_caching_repo", None)
-    if create is None:
-        yield
-        return
-
-    def create_sharing(config_name, overrides):
-        parsed, repo = create(config_name, overrides)
-        for path, loaded in repo.cache.items():        # the primary config, read while checking the search path
-            files.setdefault(path, loaded)
-        repo.cache = files
-        return parsed, repo
-
-    loader._parse_overrides_and_create_caching_repo = create_sharing
-    try:
-        yield
-    finally:
-        del loader._parse_overrides_and_create_caching_repo     # the class's again (a loader may be pickled)
-
-
 class _ComposedOnce:
     """A config loader that returns a configuration composed by `keep` to the first `load_sweep_config` asking
-    for the same overrides (then forgets it: the launcher edits what it gets); everything else is the loader's.
-    Its compositions share the config files they read (`_files_kept`)."""
+    for the same overrides (then forgets it: the launcher edits what it gets); everything else is the loader's."""
 
     def __init__(self, loader):
         self._loader = loader
         self._kept: dict[tuple[str, ...], DictConfig] = {}
-        self._files: dict = {}
 
     def _compose(self, master_config: DictConfig, overrides: Sequence[str]) -> DictConfig:
-        with stages.stage("composition"), _files_kept(self._loader, self._files):
+        with stages.stage("composition"):
             return self._loader.load_sweep_config(master_config, list(overrides))
 
     def keep(self, master_config: DictConfig, overrides: Sequence[str]) -> None:
@@ -94,12 +62,12 @@ class _ComposedOnce:
         return self._compose(master_config, sweep_overrides)
 
     def __getattr__(self, name):
-        if name in ("_loader", "_kept", "_files"):      # not yet set (while unpickling): not the loader's
+        if name in ("_loader", "_kept"):      # not yet set (while unpickling): not the loader's
             raise AttributeError(name)
         return getattr(self._loader, name)
 
     def __getstate__(self):         # into another process: the loader only
-        return {"_loader": self._loader, "_kept": {}, "_files": {}}
+        return {"_loader": self._loader, "_kept": {}}
 
     def __setstate__(self, state):
         self.__dict__.update(state)

@@ -184,40 +184,37 @@ def test_a_sweep_gives_the_basic_launchers_rows_files_and_lines(synth_root, tmp_
                                                     "[table2 2/2] mm2fsk_d10_photogrammetry"]
 
 
-@pytest.mark.parametrize("experiment", ["table2", "table3", "beyond"])
-def test_a_sweeps_compositions_share_its_config_files_and_equal_fresh_ones(experiment, monkeypatch):
-    """Every job of the sweep composed through the launch's kept config files (sweeper._files_kept) equals its
-    composition from scratch, and each config file is read once for the whole sweep, not once per job."""
+@pytest.mark.parametrize("sweep", [["experiment=table2"], ["experiment=table3"], ["experiment=beyond"],
+                                   ["cell=mm2fsk_d10", "device=cpu,cuda", "threshold_db=-10,-20"]])
+def test_a_sweeps_kept_compositions_equal_fresh_ones(sweep):
+    """Every job's configuration as the sweeper keeps it for the launcher (sweeper._ComposedOnce, composed up front)
+    equals its composition from scratch, value overrides included: one job's values never reach another's (config
+    files shared between compositions once gave a SLURM sweep's device=cpu job the device=cuda job's memory)."""
     from hydra._internal.hydra import Hydra
     from hydra._internal.utils import create_config_search_path
     from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
 
     from hydra_plugins.mm2fsk_bench import sweeper
 
-    reads = []
     try:                        # Hydra's global state, as `python -m bench` sets it up: cleared for the next tests
         loader = Hydra.create_main_hydra2(task_name="app", config_search_path=create_config_search_path(
             str(CONFIG_DIR))).config_loader
-        # imported after Hydra's plugin scan, which may import the module anew (the class its sources are made of)
-        from hydra._internal.core_plugins.file_config_source import FileConfigSource
-
-        real_read = FileConfigSource.load_config
-        monkeypatch.setattr(FileConfigSource, "load_config", lambda self, config_path: reads.append(config_path)
-                            or real_read(self, config_path))
-        master = loader.load_configuration("config", [f"experiment={experiment}", "dataset=maroon",
-                                                      "dataset.root=/x"], RunMode.MULTIRUN)
-        key, values = next(iter(master.hydra.sweeper.params.items()))
-        batch = [[f"{key}={value}"] for value in values.split(",")]
+        master = loader.load_configuration("config", [*sweep, "dataset=maroon", "dataset.root=/x"], RunMode.MULTIRUN)
+        swept = [*(master.hydra.sweeper.params or {}).items(), *((o.get_key_element(), o.value()) for o in
+                 OverridesParser.create().parse_overrides(sweep) if o.is_sweep_override())]
+        batch = [[]]
+        for key, values in swept:
+            values = values.split(",") if isinstance(values, str) else [str(v) for v in values.list]
+            batch = [[*job, f"{key}={value}"] for job in batch for value in values]
         once = sweeper._ComposedOnce(loader)
-        reads.clear()
-        shared = [OmegaConf.to_yaml(once.load_sweep_config(master, job)) for job in batch]
-        shared_reads = [path for path in reads if path != "config"]   # the primary: read to find the search path
+        for job in batch:
+            once.keep(master, job)
+        kept = [OmegaConf.to_yaml(once.load_sweep_config(master, job)) for job in batch]
         fresh = [OmegaConf.to_yaml(loader.load_sweep_config(master, job)) for job in batch]
     finally:
         GlobalHydra.instance().clear()
-    assert shared == fresh and len(batch) >= 6
-    assert sorted(shared_reads) == sorted(set(shared_reads))               # once per file, not once per job
-    assert len(shared_reads) < len(reads) / 3
+    assert kept == fresh and len(batch) >= 4 and len(set(kept)) == len(batch)
 
 
 @pytest.mark.parametrize("mode, launcher, isolated", [
