@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
 
-from bench.harness import CONFIG_DIR, workers
+from bench.harness import CONFIG_DIR, app, workers
 from bench.harness.app import run
 from bench.harness.results import MEASURED_COLUMNS, finish_deferred
 
@@ -131,6 +131,9 @@ def test_files_written_by_the_output_process_are_the_writer_threads(root, tmp_pa
         np.testing.assert_array_equal(arrays["process"][name], values)
     if with_store:                   # the cells the process wrote serve the next run
         assert len(list((stores["process"] / "cells").glob("*.h5"))) == 2
+        # a row timed `contended` (a busy test machine) would be measured again when the machine is quiet
+        # (app._reusable): not what this test is about
+        monkeypatch.setattr(app, "_reusable", lambda stored_timing, timing: True)
         assert all(r["cached"] for r in _run(root, tmp_path / "again", stores["process"], 0))
     assert {r["timing"] for r in rows["process"]} <= {"alone", "contended"}
     # the process wrote both captures' files, and without a store their arrays into arrays.h5 (its one writer)
