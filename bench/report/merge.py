@@ -24,8 +24,8 @@ import sys
 import threading
 import traceback
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pandas as pd
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
@@ -33,6 +33,9 @@ from bench import cli
 from bench.harness import stages
 from bench.harness.results import finish_deferred, write_results
 from methods.domain.errors import DatasetError
+
+if TYPE_CHECKING:   # imported where used: the sweep's process loads this callback, and its jobs do not need pandas
+    import pandas as pd
 
 
 def job_files(root: Path, name: str) -> list[Path]:
@@ -58,11 +61,15 @@ def read_job_rows(path: Path) -> pd.DataFrame:
     short = next((n for n, line in enumerate(lines[1:], 2) if len(line) != len(lines[0])), None)
     if short is not None:
         raise DatasetError(path, f"line {short} has {len(lines[short - 1])} fields, the header {len(lines[0])}")
+    import pandas as pd
+
     return pd.read_csv(io.StringIO(text))
 
 
 def merge(root: Path) -> pd.DataFrame:
     """Concatenate `root/*/results.csv` (job order) into `root/results.csv` (atomic); returns the rows."""
+    import pandas as pd
+
     parts = job_files(root, "results.csv")
     if not parts:
         raise FileNotFoundError(f"{root}: no job wrote */results.csv")
@@ -150,6 +157,8 @@ class Worker:
 def _warm_up() -> None:
     """The merge's first-use costs, paid while the jobs run: its imports, pandas' LaTeX writer (jinja2 templates),
     matplotlib's Agg canvas, fonts and PNG writer (a throwaway plot): ~0.1 s less to wait for at the end."""
+    import pandas as pd
+
     from bench.report import keyed, plots, tables  # noqa: F401
 
     pd.DataFrame({"a": [1.0]}).style.to_latex()
