@@ -6,6 +6,7 @@ from __future__ import annotations
 import threading
 
 IN_PROCESS_LAUNCHERS = ("inprocess", "basic")
+_threads: list[threading.Thread] = []
 NOT_RUNS = {"--cfg", "-c", "--info", "-i", "--help", "-h", "--hydra-help", "--shell-completion", "-sc"}
 
 
@@ -38,4 +39,12 @@ def start_early(argv: list[str]) -> None:
     what the process writes to its stderr is held and written after (runtime.init), so an early error line (a config
     mistake) is written before the process ends, not lost with the thread."""
     if starts_early(argv):
-        threading.Thread(target=_start_warp, name="warp-start").start()
+        _threads.append(threading.Thread(target=_start_warp, name="warp-start"))
+        _threads[-1].start()
+
+
+def wait() -> None:
+    """Until Warp's early start (if any) has ended: before this process forks (the merge's worker,
+    bench.report.merge), which must not copy a thread's half-taken import locks or the stderr it holds."""
+    for thread in _threads:
+        thread.join()

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-from bench import cli
+from bench import cli, warpstart
 from bench.harness import stages
 from bench.harness.results import finish_deferred, write_results
 from methods.domain.errors import DatasetError
@@ -237,6 +237,7 @@ class MergeResults(Callback):
                 and threading.current_thread() is threading.main_thread()):
             with stages.stage("outputs"):
                 finish_deferred()        # no writer thread mid-write while the process forks
+                warpstart.wait()         # nor Warp's start (a first job on the CPU did not wait for it)
             self._worker = start_worker()
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:

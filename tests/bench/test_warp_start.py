@@ -63,3 +63,39 @@ def test_an_early_error_line_is_written_while_warp_starts(tmp_path):
         outputs.append((result.returncode, result.stderr))
     assert outputs[0] == outputs[1]
     assert outputs[0][0] != 0 and "no_such_experiment" in outputs[0][1]
+
+
+def test_the_merges_fork_waits_for_warps_early_start(monkeypatch):
+    """A sweep whose first job runs on the CPU does not wait for Warp's start; the merge's worker is forked only
+    after it (a fork must not copy the starting thread's import locks or its held stderr)."""
+    from bench import warpstart
+
+    started, released = threading.Event(), threading.Event()
+
+    def slow_start():
+        started.set()
+        released.wait(5)
+
+    monkeypatch.setattr(warpstart, "_start_warp", slow_start)
+    monkeypatch.setattr(warpstart, "_threads", [])
+    warpstart.start_early(["-m", "device=cpu,cuda"])
+    started.wait(5)
+    waiting = threading.Thread(target=warpstart.wait)
+    waiting.start()
+    waiting.join(0.2)
+    assert waiting.is_alive()             # still starting: the fork waits
+    released.set()
+    waiting.join(5)
+    assert not waiting.is_alive()
+
+
+def test_the_merge_waits_for_warps_start_before_it_forks(monkeypatch):
+    from bench.report import merge
+
+    calls = []
+    monkeypatch.setattr(merge.warpstart, "wait", lambda: calls.append("wait for Warp's start"))
+    monkeypatch.setattr(merge, "start_worker", lambda: calls.append("fork"))
+    callback = merge.MergeResults()
+    callback.on_multirun_start(None)
+    callback.on_job_end(None, None)
+    assert calls == ["wait for Warp's start", "fork"]
