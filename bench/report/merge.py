@@ -8,9 +8,9 @@ rest of the merge).
 `python -m bench.report.merge ROOT [--table NAME]` does the same for a sweep that was interrupted before the end.
 
 In a multirun the merge runs in a worker process (`Worker`, forked from the sweep's process) started when its first
-job ends: it imports what the merge needs beyond what the jobs imported (SciPy's statistics, matplotlib: ~0.6 s on
-a quiet 2-core machine) while the other jobs run, then waits for the sweep root on a pipe; the callback hands it
-over at the multirun's end and waits for it. Its errors are its own lines on stderr and its exit code is the
+job ends: it imports what the merge needs beyond what the jobs imported (pandas, SciPy's statistics, matplotlib:
+~0.8 s on a quiet 2-core machine) while the other jobs run, then waits for the sweep root on a pipe; the callback
+hands it over at the multirun's end and waits for it. Its errors are its own lines on stderr and its exit code is the
 sweep's (as in one process).
 """
 from __future__ import annotations
@@ -115,10 +115,10 @@ def runtime_plot(root: Path, table: str, summary: pd.DataFrame) -> Path:
 
 class Worker:
     """The merge's worker process (module doc): forked from this process, so it shares the modules this process has
-    imported (NumPy, pandas) and imports only the rest (SciPy's statistics, matplotlib); it reads one request from
-    a pipe and exits with 0 (done, or no request: the multirun ended without a merge), 2 after a user error (its
-    one `error:` line on stderr) or 1 after a bug (its traceback on stderr). It never runs this process's exit
-    handlers (e.g. the stage clock's, bench.harness.stages): the waiting process counts the merge."""
+    imported (NumPy, SciPy's spatial, h5py) and imports only the rest (pandas, SciPy's statistics, matplotlib); it reads
+    one request from a pipe and exits with 0 (done, or no request: the multirun ended without a merge), 2 after a user
+    error (its one `error:` line on stderr) or 1 after a bug (its traceback on stderr). It never runs this process's
+    exit handlers (e.g. the stage clock's, bench.harness.stages): the waiting process counts the merge."""
 
     def __init__(self):
         read_fd, self._write_fd = os.pipe()
