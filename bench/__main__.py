@@ -6,6 +6,7 @@ explicit `hydra.run.dir=` (with -m: `hydra.sweep.dir=`) that cannot be created e
 a traceback). A closed stdout (`python -m bench ... | head -1`) or Ctrl-C end quietly (bench.cli). Hydra's own
 messages for config mistakes (an unknown option of a group, with the list of options) are left as Hydra words them.
 
+Where the jobs run here on a Warp device, Warp starts on a thread of its own while Hydra starts (bench.warpstart).
 At its exit the process skips the interpreter's teardown of its modules and objects (`QuickExit`).
 """
 import atexit
@@ -13,7 +14,7 @@ import logging
 import os
 import sys
 
-from bench import cli
+from bench import cli, warpstart
 from bench.harness import stages
 
 
@@ -82,6 +83,7 @@ def _main() -> None:
     logging.raiseExceptions = False    # a log line to a closed stdout is dropped, not a '--- Logging error ---' dump
     if check_command_line(sys.argv[1:]):
         skip_mode_probe()
+    warpstart.start_early(sys.argv[1:])
     from bench.harness.app import main
 
     main()

@@ -7,10 +7,10 @@ reverse order, so the clock starts before the merge and the summary comes after 
 """
 from __future__ import annotations
 
+import csv
 import sys
 from pathlib import Path
 
-import pandas as pd
 import yaml
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
@@ -23,12 +23,14 @@ _merging: list[Heartbeat] = []
 
 
 def _job_identities(root: Path) -> dict[str, set[tuple]]:
-    """Job folder name -> the identities of its rows."""
+    """Job folder name -> the identities of its rows (the values as written; read without pandas, which the sweep's
+    process does not import otherwise)."""
     jobs = {}
     for path in sorted(root.glob("*/results.csv")):
-        rows = pd.read_csv(path, keep_default_na=False, dtype=str)
-        columns = [c for c in ROW_IDENTITY if c in rows]
-        jobs[path.parent.name] = set(rows[columns].itertuples(index=False, name=None))
+        with path.open(newline="") as handle:
+            rows = csv.DictReader(handle)
+            columns = [c for c in ROW_IDENTITY if c in (rows.fieldnames or [])]
+            jobs[path.parent.name] = {tuple(row[c] or "" for c in columns) for row in rows}
     return jobs
 
 

@@ -8,9 +8,9 @@ rest of the merge).
 `python -m bench.report.merge ROOT [--table NAME]` does the same for a sweep that was interrupted before the end.
 
 In a multirun the merge runs in a worker process (`Worker`, forked from the sweep's process) started when its first
-job ends: it imports what the merge needs beyond what the jobs imported (SciPy's statistics, matplotlib: ~0.6 s on
-a quiet 2-core machine) while the other jobs run, then waits for the sweep root on a pipe; the callback hands it
-over at the multirun's end and waits for it. Its errors are its own lines on stderr and its exit code is the
+job ends: it imports what the merge needs beyond what the jobs imported (pandas, SciPy's statistics, matplotlib:
+~0.8 s on a quiet 2-core machine) while the other jobs run, then waits for the sweep root on a pipe; the callback
+hands it over at the multirun's end and waits for it. Its errors are its own lines on stderr and its exit code is the
 sweep's (as in one process).
 """
 from __future__ import annotations
@@ -24,15 +24,18 @@ import sys
 import threading
 import traceback
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pandas as pd
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-from bench import cli
+from bench import cli, warpstart
 from bench.harness import stages
 from bench.harness.results import finish_deferred, write_results
 from methods.domain.errors import DatasetError
+
+if TYPE_CHECKING:   # imported where used: the sweep's process loads this callback, and its jobs do not need pandas
+    import pandas as pd
 
 
 def job_files(root: Path, name: str) -> list[Path]:
@@ -58,11 +61,15 @@ def read_job_rows(path: Path) -> pd.DataFrame:
     short = next((n for n, line in enumerate(lines[1:], 2) if len(line) != len(lines[0])), None)
     if short is not None:
         raise DatasetError(path, f"line {short} has {len(lines[short - 1])} fields, the header {len(lines[0])}")
+    import pandas as pd
+
     return pd.read_csv(io.StringIO(text))
 
 
 def merge(root: Path) -> pd.DataFrame:
     """Concatenate `root/*/results.csv` (job order) into `root/results.csv` (atomic); returns the rows."""
+    import pandas as pd
+
     parts = job_files(root, "results.csv")
     if not parts:
         raise FileNotFoundError(f"{root}: no job wrote */results.csv")
@@ -108,10 +115,10 @@ def runtime_plot(root: Path, table: str, summary: pd.DataFrame) -> Path:
 
 class Worker:
     """The merge's worker process (module doc): forked from this process, so it shares the modules this process has
-    imported (NumPy, pandas) and imports only the rest (SciPy's statistics, matplotlib); it reads one request from
-    a pipe and exits with 0 (done, or no request: the multirun ended without a merge), 2 after a user error (its
-    one `error:` line on stderr) or 1 after a bug (its traceback on stderr). It never runs this process's exit
-    handlers (e.g. the stage clock's, bench.harness.stages): the waiting process counts the merge."""
+    imported (NumPy, SciPy's spatial, h5py) and imports only the rest (pandas, SciPy's statistics, matplotlib); it reads
+    one request from a pipe and exits with 0 (done, or no request: the multirun ended without a merge), 2 after a user
+    error (its one `error:` line on stderr) or 1 after a bug (its traceback on stderr). It never runs this process's
+    exit handlers (e.g. the stage clock's, bench.harness.stages): the waiting process counts the merge."""
 
     def __init__(self):
         read_fd, self._write_fd = os.pipe()
@@ -150,6 +157,8 @@ class Worker:
 def _warm_up() -> None:
     """The merge's first-use costs, paid while the jobs run: its imports, pandas' LaTeX writer (jinja2 templates),
     matplotlib's Agg canvas, fonts and PNG writer (a throwaway plot): ~0.1 s less to wait for at the end."""
+    import pandas as pd
+
     from bench.report import keyed, plots, tables  # noqa: F401
 
     pd.DataFrame({"a": [1.0]}).style.to_latex()
@@ -228,6 +237,7 @@ class MergeResults(Callback):
                 and threading.current_thread() is threading.main_thread()):
             with stages.stage("outputs"):
                 finish_deferred()        # no writer thread mid-write while the process forks
+                warpstart.wait()         # nor Warp's start (a first job on the CPU did not wait for it)
             self._worker = start_worker()
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:

@@ -2,24 +2,32 @@
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import sys
 import tempfile
+import threading
 
 import warp as wp
 
 NO_DRIVER_NOTICE = "Could not find or load the NVIDIA CUDA driver"
 
 
-@functools.cache
+_INIT = threading.Lock()       # a sweep may start Warp on a thread of its own (bench.__main__); callers wait for it
+_started: list[bool] = []
+
+
 def init() -> None:
-    """wp.init() once. Warp's native code prints a warning on stderr where there is no CUDA driver; on a CPU-only
-    machine that is expected (callers ask `cuda_available()` and say so in one line), so that warning is dropped
-    and anything else the native code prints is passed on."""
-    wp.config.log_level = wp.LOG_WARNING
-    with _native_stderr() as captured:
-        wp.init()
+    """wp.init() once per process, whichever thread asks first (the others wait for it). Warp's native code prints a
+    warning on stderr where there is no CUDA driver; on a CPU-only machine that is expected (callers ask
+    `cuda_available()` and say so in one line), so that warning is dropped and anything else the native code prints
+    is passed on."""
+    with _INIT:
+        if _started:
+            return
+        wp.config.log_level = wp.LOG_WARNING
+        with _native_stderr() as captured:
+            wp.init()
+        _started.append(True)
     lines = [line for line in captured() if NO_DRIVER_NOTICE not in line]
     if lines:
         sys.stderr.write("".join(f"{line}\n" for line in lines))

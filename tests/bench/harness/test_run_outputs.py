@@ -5,6 +5,8 @@ its cached re-run and a run without it write the same files; the depth preview's
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import h5py
 import numpy as np
@@ -32,6 +34,62 @@ def test_appended_rows_read_back_as_the_rewritten_table(tmp_path):
         appended.add(row)
     write_results(tmp_path / "whole.csv", rows)
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "appended.csv"), pd.read_csv(tmp_path / "whole.csv"))
+
+
+def test_one_rows_lines_are_pandas_own():
+    """`csv_lines` (a run's rows without pandas) against pandas' `to_csv` of a one-row table, on fresh random values
+    of every kind it writes; another kind is left to pandas (None)."""
+    from bench.harness.results import csv_lines
+
+    rng = np.random.default_rng()
+    kinds = [lambda: None, lambda: float("nan"), lambda: np.float32("nan"), lambda: bool(rng.integers(2)),
+             lambda: np.bool_(rng.integers(2)), lambda: int(rng.integers(-10**12, 10**12)), lambda: 2**70,
+             lambda: np.int32(rng.integers(-1000, 1000)), lambda: np.int64(rng.integers(-10**15, 10**15)),
+             lambda: float(rng.standard_normal() * 10.0 ** rng.integers(-20, 20)), lambda: float(rng.integers(100)),
+             lambda: np.float64(rng.random()) * 10.0 ** rng.integers(-8, 18), lambda: np.float32(rng.random()),
+             lambda: np.float32(rng.standard_normal() * 1e6), lambda: float("inf"), lambda: -0.0,
+             lambda: "", lambda: "plain", lambda: 'a, "quoted"\nvalue', lambda: np.str_("x,y")]
+    for _ in range(300):
+        columns = [f"c{i}" for i in range(int(rng.integers(1, 8)))]
+        row = {c: kinds[int(rng.integers(len(kinds)))]() for c in columns}
+        for header in (True, False):
+            assert csv_lines(columns, row, header) == pd.DataFrame([row], columns=columns).to_csv(header=header,
+                                                                                                   index=False)
+    assert csv_lines(["a"], {"a": [1, 2]}, True) is None
+
+
+JOB_PATH = """
+import sys
+import numpy as np
+import hydra_plugins.mm2fsk_bench.inprocess, hydra_plugins.mm2fsk_bench.slurm, hydra_plugins.mm2fsk_bench.sweeper
+import bench.harness.app, bench.harness.summary, bench.report.merge, bench.harness.validate
+from pathlib import Path
+from bench.harness.results import ResultsCsv, write_depth
+from methods.domain.capture import RadarGrid
+root = Path(sys.argv[1])
+rows = ResultsCsv(root / "job" / "results.csv")
+(root / "job").mkdir()
+for i in range(3):
+    rows.add({"object": "01_plate", "distance": 30, "frame": i, "method": "mm2fsk", "P_cm": 0.1 * i, "roi_px": None})
+depth = np.random.default_rng().random((9, 9))
+depth[0, 0] = np.nan
+write_depth(root / "job", "01_plate_30_0", depth, RadarGrid((-0.1, -0.1, 0.2), (0.1, 0.1, 0.4), (9, 9, 5)))
+bench.harness.summary.colliding_jobs(root)
+print(*sorted(m for m in sys.argv[2:] if m in sys.modules))
+"""
+
+
+def test_a_jobs_process_leaves_the_merges_modules_to_the_merge(tmp_path):
+    """What a sweep's process loads (its launcher, sweeper and callbacks, the app) and what a job does besides its
+    method and metrics (rows appended, depth files and previews written, the end's identity check) import neither
+    pandas nor matplotlib nor SciPy's statistics: only the merge (its worker process) needs them (0.3-0.5 s of
+    imports; docs/measurements/sweep.md)."""
+    result = subprocess.run([sys.executable, "-c", JOB_PATH, str(tmp_path), "pandas", "matplotlib", "scipy.stats"],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == []
+    assert (tmp_path / "job" / "depth_preview" / "01_plate_30_0.png").is_file()
+    assert len((tmp_path / "job" / "results.csv").read_text().splitlines()) == 4
 
 
 @pytest.fixture(scope="module")
@@ -87,6 +145,7 @@ def test_preview_colours_are_matplotlibs():
     scaled = rng.random((60, 70))
     scaled[rng.random(scaled.shape) < 0.3] = np.nan
     scaled.flat[:4] = [0.0, 1.0, np.nextafter(1.0, 0.0), 0.5]
+    scaled.flat[4:260] = (np.arange(256) + rng.random(256)) / 256      # every entry of the table
     reference = colormaps[PREVIEW_COLORMAP].with_extremes(bad=NO_DEPTH_GREY)(np.ma.masked_invalid(scaled),
                                                                              bytes=True)[..., :3]
     np.testing.assert_array_equal(preview_rgb(scaled), reference)
