@@ -29,10 +29,11 @@ def test_new_frame_rotates_the_phase_and_shifts_the_depth_only():
     assert capture.radar.signal is signal and capture.realsense.depth_mm is depth_mm      # the input is untouched
 
 
-def test_agreement_counts_pixels_valid_in_both_within_a_tenth_of_a_millimetre():
+def test_agreement_counts_pixels_within_a_tenth_of_a_millimetre_and_a_lost_or_gained_one_as_wrong():
     ref = np.array([0.30, 0.31, np.nan, 0.33])
-    assert agreement(ref, np.array([0.30005, 0.3102, 0.5, np.nan])) == 50.0
-    assert agreement(ref, np.full(4, np.nan)) == 100.0
+    assert agreement(ref, np.array([0.30005, 0.3102, 0.5, np.nan])) == 25.0   # 1 of 4: a miss, a gain, a loss
+    assert agreement(ref, np.full(4, np.nan)) == 0.0
+    assert agreement(np.full(4, np.nan), np.full(4, np.nan)) == 100.0
 
 
 def test_unknown_case_is_one_error_line():
