@@ -6,8 +6,9 @@ reconstruction. Build the ground-truth tree once per capture (`PointSet`) and re
 Queries run on a thread pool the process keeps (`_pool`), each in interleaved chunks (every c-th point) queried
 with SciPy's one-thread query: a point's nearest distance does not depend on the other points of its query, so the
 distances are those of one query bit for bit. SciPy's own `workers=N` starts N threads for every call (Table III's
-224 queries a sweep: 3,584 thread starts on a 16-core host, ~1.3 ms a call) and splits the points into N contiguous
-runs, of which the one over a method's off-object clutter takes longest while the others wait.
+224 queries a sweep: 3,584 thread starts on a 16-core host; a 64-point query with 16 costs ~1.4 ms against 0.09 ms
+on one) and splits the points into N contiguous runs, of which the one over a method's off-object clutter takes
+longest while the others wait (Table III's 112 rows scored on the H100 host: 16.0-17.1 -> 12.5-13.4 ms a row).
 """
 from __future__ import annotations
 
@@ -31,10 +32,10 @@ if TYPE_CHECKING:
 QUERY_THREADS: int | None = None
 LEAF_POINTS = 64
 #: fewest points of a chunk handed to a pool thread: a query of fewer than twice as many runs on the calling thread
-#: (handing a chunk over costs tens of microseconds; a point's query ~1-3 us off a lattice surface)
+#: (handing a chunk over costs tens of microseconds; a point's query ~0.5-4 us off a lattice surface). One chunk
+#: per thread: interleaved chunks cost about the same each (Table III's rows on the H100 host's 16 cores: one a
+#: thread 12.5-13.4 ms a row, two 13.6-14.3, four of >= 256 points 18-21; chunks of >= 1,024 points 14.7)
 MIN_CHUNK_POINTS = 512
-#: chunks per pool thread: interleaved chunks cost about the same each, a few per thread even out the rest
-CHUNKS_PER_THREAD = 2
 
 
 @dataclass
@@ -85,7 +86,7 @@ if hasattr(os, "register_at_fork"):       # a forked child has none of its paren
 
 
 def _chunks(points: int, threads: int) -> int:
-    return max(1, min(threads * CHUNKS_PER_THREAD, points // MIN_CHUNK_POINTS)) if threads > 1 else 1
+    return max(1, min(threads, points // MIN_CHUNK_POINTS))
 
 
 def _submit(tree: cKDTree, src_m: np.ndarray, threads: int) -> tuple[np.ndarray, list[Future]]:

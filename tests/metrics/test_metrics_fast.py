@@ -150,7 +150,7 @@ def test_queries_run_on_the_cores_the_process_may_use_not_the_hosts(monkeypatch)
     monkeypatch.setattr(host.os, "cpu_count", lambda: 224)
     nearest_distances_m(np.zeros((100 * chamfer.MIN_CHUNK_POINTS, 3)), points)
     assert chamfer._POOL[0][0] == 3                                   # the pool's threads: the process's cores
-    assert calls == [(1, False)] * 3 * chamfer.CHUNKS_PER_THREAD      # one-thread queries, on pool threads
+    assert calls == [(1, False)] * 3                                  # one-thread queries, on pool threads
     calls.clear()
     nearest_distances_m(np.zeros((4, 3)), points)                     # too few points to hand over
     monkeypatch.setattr(chamfer, "QUERY_THREADS", 1)                 # a scoring worker's setting
