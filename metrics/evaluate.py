@@ -33,6 +33,7 @@ then names the reason: a row with a failure is counted as a failed capture by th
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +41,7 @@ import numpy as np
 from methods.domain.capture import Capture, RadarGrid
 from methods.domain.lattice import triangulated_vertices
 from methods.domain.transforms import apply_transform
-from metrics.chamfer import PointSet, nearest_distances_m, one_sided_chamfer_m
+from metrics.chamfer import PointSet, nearest_both_ways_m, nearest_distances_m
 from metrics.groundtruth import rasterise_depth_m
 from metrics.masks import (
     MAROON_RADAR_PITCH_MM,
@@ -48,6 +49,7 @@ from metrics.masks import (
     erode_mask,
     erosion_kernel_mm,
     inside_mask_bb,
+    inside_mask_bb_xyz,
     kernel_px_for_pitch,
     radar_erosion_kernel_px,
     reference_mask_bb_m,
@@ -86,6 +88,15 @@ class GroundTruth:
 def _pixel_points_m(grid: RadarGrid, depth_m: np.ndarray) -> np.ndarray:
     x_m, y_m = grid.pixel_xy_m()
     return np.stack([x_m, y_m, depth_m], axis=-1)
+
+
+@functools.lru_cache(maxsize=16)
+def _pixel_axes_m(grid: RadarGrid) -> tuple[np.ndarray, np.ndarray]:
+    """x (m) of every pixel column and y (m) of every row (row 0 = +y): `grid.pixel_xy_m()`'s values without its
+    two (ny, nx) arrays, kept per grid (read-only: shared by every evaluation on it)."""
+    x_m, y_m = grid.x_m, grid.y_m[::-1].copy()
+    x_m.flags.writeable = y_m.flags.writeable = False
+    return x_m, y_m
 
 
 def maroon_sample_xy_m(grid: RadarGrid) -> tuple[np.ndarray, np.ndarray]:
@@ -205,20 +216,40 @@ def reference_projective(depth_m: np.ndarray, used: np.ndarray, source_mask: np.
     return float(np.mean(np.abs(errors_mm[counted])) / 10.0), int(counted.sum())
 
 
-def _c_s_and_off_err_cm(radar_points_m: np.ndarray, off: np.ndarray, gt_points: PointSet, sound_points: PointSet
-                        ) -> tuple[float, float]:
-    """C_s (cm: `radar_points_m` to `gt_points`) and off_err (cm: the radar points flagged `off`, off the object, to
-    the sound ground truth's points). Where both go to the same points (the sound profile) the off points'
-    distances are picked from C_s's query, not queried again: the same numbers, since a point's nearest distance
-    does not depend on the other points of its query."""
+def _chamfers_cm(radar_points_m: np.ndarray, off: np.ndarray, gt_points: PointSet, sound_points: PointSet
+                 ) -> tuple[float, float, float]:
+    """C_g and C_s (cm: `gt_points` to `radar_points_m` and back) and off_err (cm: the radar points flagged `off`,
+    off the object, to the sound ground truth's points). Where both go to the same points (the sound profile) the
+    off points' distances are picked from C_s's query, not queried again: the same numbers, since a point's nearest
+    distance does not depend on the other points of its query."""
     off_points_m = radar_points_m[off]
-    if gt_points is not sound_points or not len(radar_points_m) or not len(gt_points.points_m):
-        off_err_cm = (float(np.mean(nearest_distances_m(off_points_m, sound_points))) * 100.0
-                      if len(off_points_m) and len(sound_points.points_m) else float("nan"))
-        return one_sided_chamfer_m(radar_points_m, gt_points) * 100.0, off_err_cm
-    distances_m = nearest_distances_m(radar_points_m, gt_points)
-    off_err_cm = float(np.mean(distances_m[off])) * 100.0 if len(off_points_m) else float("nan")
-    return float(np.mean(distances_m)) * 100.0, off_err_cm
+    if not len(radar_points_m) or not len(gt_points.points_m):
+        c_g_cm = c_s_cm = float("nan")
+        to_gt_m = None
+    else:
+        to_gt_m, to_radar_m = nearest_both_ways_m(radar_points_m, gt_points)
+        c_g_cm, c_s_cm = float(np.mean(to_radar_m)) * 100.0, float(np.mean(to_gt_m)) * 100.0
+    if not len(off_points_m) or not len(sound_points.points_m):
+        off_err_cm = float("nan")
+    elif gt_points is sound_points and to_gt_m is not None:
+        off_err_cm = float(np.mean(to_gt_m[off])) * 100.0
+    else:
+        off_err_cm = float(np.mean(nearest_distances_m(off_points_m, sound_points))) * 100.0
+    return c_g_cm, c_s_cm, off_err_cm
+
+
+def _radar_points(depth_m: np.ndarray, used: np.ndarray, grid: RadarGrid, mask_bb_m: dict[str, float]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(valid depths, the source mask: valid and inside `mask_bb`, the radar points (m): pixels `used` and in the
+    source mask, in row-major order). A pixel's point is (x_m[j], y_m[i], depth) (`_pixel_points_m`): bounds are
+    tested per column, row and depth, the points gathered for the selected pixels only, without the (ny, nx, 3)
+    array (the same booleans and coordinates; invalid depths fail every z bound but are no sources anyway)."""
+    valid = np.isfinite(depth_m) & (depth_m != 0)
+    x_m, y_m = _pixel_axes_m(grid)
+    with np.errstate(invalid="ignore"):
+        source_mask = valid & inside_mask_bb_xyz(x_m[None, :], y_m[:, None], depth_m, mask_bb_m)
+    rows, columns = np.nonzero(used & source_mask)
+    return valid, source_mask, np.column_stack([x_m[columns], y_m[rows], depth_m[rows, columns]])
 
 
 def _failure(depth_m: np.ndarray, used: np.ndarray, selected: np.ndarray, scores: dict) -> str:
@@ -240,12 +271,9 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
     if depth_m.shape != gt.grid.image_shape:
         raise ValueError(f"depth map {depth_m.shape} does not match the ground-truth grid {gt.grid.image_shape}")
     used = triangulated_vertices(depth_m, TRIANGULATION_THRESHOLD_M, rule="maroon" if faithful else "sound")
-    points_m = _pixel_points_m(gt.grid, np.nan_to_num(depth_m))
-    valid = np.isfinite(depth_m) & (depth_m != 0)
-    mask_bb_m = gt.reference.mask_bb_m if faithful else gt.mask_bb_m
-    source_mask = valid & inside_mask_bb(points_m.reshape(-1, 3), mask_bb_m).reshape(valid.shape)
+    valid, source_mask, radar_points_m = _radar_points(depth_m, used, gt.grid,
+                                                       gt.reference.mask_bb_m if faithful else gt.mask_bb_m)
     selected = used & source_mask
-    radar_points_m = points_m[selected]
     has_gt = np.isfinite(gt.depth_m)
     off = selected & ~gt.silhouette
     gt_points = gt.reference.points if faithful else gt.points
@@ -260,9 +288,9 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
     outside = used & ~selected
     counted = selected.sum() + outside.sum()
     silhouette_px = int(gt.silhouette.sum())
-    c_s_cm, off_err_cm = _c_s_and_off_err_cm(radar_points_m, off[selected], gt_points, gt.points)
+    c_g_cm, c_s_cm, off_err_cm = _chamfers_cm(radar_points_m, off[selected], gt_points, gt.points)
     scores = {
-        "C_g_cm": one_sided_chamfer_m(gt_points.points_m, PointSet(radar_points_m)) * 100.0,
+        "C_g_cm": c_g_cm,
         "C_s_cm": c_s_cm,
         "P_cm": p_cm, "P_e_cm": p_e_cm,
         "coverage_pct": 100.0 * (selected & gt.silhouette).sum() / silhouette_px if silhouette_px else float("nan"),

@@ -18,12 +18,18 @@ _MIN_KEPT_PX = 10             # MAROON retries with a smaller kernel while the e
 def inside_mask_bb(points_m: np.ndarray, mask_bb_m: dict[str, float]) -> np.ndarray:
     """(N,) bool: points within every present bound of `mask_bb` (inclusive), radar space metres."""
     points_m = np.asarray(points_m)
-    keep = np.ones(len(points_m), dtype=bool)
-    for axis, column in (("x", 0), ("y", 1), ("z", 2)):
+    return inside_mask_bb_xyz(points_m[:, 0], points_m[:, 1], points_m[:, 2], mask_bb_m)
+
+
+def inside_mask_bb_xyz(x_m, y_m, z_m, mask_bb_m: dict[str, float]) -> np.ndarray:
+    """`inside_mask_bb` of coordinates given apart, each an array or scalar, the result of their broadcast shape
+    (e.g. an image's columns (1, nx), rows (ny, 1) and depths (ny, nx): six passes over it, no (ny, nx, 3) array)."""
+    keep = np.ones(np.broadcast_shapes(np.shape(x_m), np.shape(y_m), np.shape(z_m)), dtype=bool)
+    for axis, values in (("x", x_m), ("y", y_m), ("z", z_m)):
         if f"{axis}min" in mask_bb_m:
-            keep &= points_m[:, column] >= mask_bb_m[f"{axis}min"]
+            keep &= values >= mask_bb_m[f"{axis}min"]
         if f"{axis}max" in mask_bb_m:
-            keep &= points_m[:, column] <= mask_bb_m[f"{axis}max"]
+            keep &= values <= mask_bb_m[f"{axis}max"]
     return keep
 
 

@@ -74,7 +74,7 @@ def _brute_nearest_m(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
 
 
 def test_c_s_and_off_err_from_one_query_equal_two_queries_and_brute_force():
-    from metrics.evaluate import _c_s_and_off_err_cm
+    from metrics.evaluate import _chamfers_cm
 
     rng = np.random.default_rng()
     x, y = np.meshgrid(np.arange(-0.04, 0.04, 1e-3), np.arange(-0.03, 0.03, 1e-3))
@@ -84,37 +84,100 @@ def test_c_s_and_off_err_from_one_query_equal_two_queries_and_brute_force():
         radar = np.column_stack([x.ravel(), y.ravel(), 0.3 + rng.uniform(-0.05, 0.1, x.size)])
         radar = radar[rng.random(x.size) < 0.5]
         off = rng.random(len(radar)) < rng.uniform(0.05, 0.6)
-        c_s_cm, off_err_cm = _c_s_and_off_err_cm(radar, off, gt, gt)
+        c_g_cm, c_s_cm, off_err_cm = _chamfers_cm(radar, off, gt, gt)
         distances_m = _brute_nearest_m(radar, gt.points_m)
         assert c_s_cm == float(np.mean(distances_m)) * 100.0
+        assert c_g_cm == float(np.mean(_brute_nearest_m(gt.points_m, radar))) * 100.0
         assert off_err_cm == float(np.mean(_brute_nearest_m(radar[off], gt.points_m))) * 100.0
         assert off_err_cm == float(np.mean(nearest_distances_m(radar[off], gt))) * 100.0   # the query it replaces
         other = PointSet(gt.points_m[::2])                  # the faithful profile: C_s to other points, off_err not
-        c_s_cm, off_err_cm = _c_s_and_off_err_cm(radar, off, other, gt)
+        c_g_cm, c_s_cm, off_err_cm = _chamfers_cm(radar, off, other, gt)
         assert c_s_cm == float(np.mean(_brute_nearest_m(radar, other.points_m))) * 100.0
+        assert c_g_cm == float(np.mean(_brute_nearest_m(other.points_m, radar))) * 100.0
         assert off_err_cm == float(np.mean(distances_m[off])) * 100.0
     none = np.zeros(0, dtype=bool)
-    assert all(np.isnan(_c_s_and_off_err_cm(np.zeros((0, 3)), none, gt, gt)))
-    c_s_cm, off_err_cm = _c_s_and_off_err_cm(radar[:5], np.zeros(5, dtype=bool), gt, gt)
-    assert np.isfinite(c_s_cm) and np.isnan(off_err_cm)
+    assert all(np.isnan(_chamfers_cm(np.zeros((0, 3)), none, gt, gt)))
+    c_g_cm, c_s_cm, off_err_cm = _chamfers_cm(radar[:5], np.zeros(5, dtype=bool), gt, gt)
+    assert np.isfinite(c_g_cm) and np.isfinite(c_s_cm) and np.isnan(off_err_cm)
+    c_g_cm, c_s_cm, off_err_cm = _chamfers_cm(radar, off, PointSet(np.zeros((0, 3))), gt)   # no reference points
+    assert np.isnan(c_g_cm) and np.isnan(c_s_cm)
+    assert off_err_cm == float(np.mean(_brute_nearest_m(radar[off], gt.points_m))) * 100.0
+
+
+@pytest.mark.parametrize("threads", [2, 3, 16])
+def test_queries_in_interleaved_chunks_on_the_pool_equal_one_query_and_brute_force(monkeypatch, threads):
+    from scipy.spatial import cKDTree
+
+    from metrics import chamfer
+
+    monkeypatch.setattr(chamfer, "QUERY_THREADS", threads)
+    rng = np.random.default_rng()
+    x, y = np.meshgrid(np.arange(-0.05, 0.05, 1e-3), np.arange(-0.04, 0.04, 1e-3))
+    surface = np.column_stack([x.ravel(), y.ravel(), 0.3 + 0.2 * x.ravel() ** 2])
+    surface = surface[rng.random(len(surface)) < 0.8]
+    for points in (3, chamfer.MIN_CHUNK_POINTS * 2 - 1, chamfer.MIN_CHUNK_POINTS * 2 + 7, 5000):   # around the
+        assert chamfer._chunks(points, threads) >= 1                                        # one-chunk threshold
+        queries = surface[rng.choice(len(surface), points, replace=False)] if points <= len(surface) else \
+            surface[rng.choice(len(surface), points)]
+        queries = queries + np.column_stack([rng.normal(0, 3e-3, (points, 2)), rng.uniform(-0.03, 0.1, points)])
+        one_query = cKDTree(surface).query(queries, k=1, workers=1)[0]
+        got = nearest_distances_m(queries, PointSet(surface))
+        assert got.dtype == np.float64 and np.array_equal(got, one_query)
+        assert np.array_equal(got, _brute_nearest_m(queries, surface))
+        to_surface, to_queries = chamfer.nearest_both_ways_m(queries, PointSet(surface))
+        assert np.array_equal(to_surface, one_query)
+        assert np.array_equal(to_queries, _brute_nearest_m(surface, queries))
+    assert chamfer._chunks(chamfer.MIN_CHUNK_POINTS * 2 + 7, threads) == 2          # the threshold is exercised
+    assert chamfer._chunks(chamfer.MIN_CHUNK_POINTS * 2 - 1, threads) == 1
 
 
 def test_queries_run_on_the_cores_the_process_may_use_not_the_hosts(monkeypatch):
+    import threading
+
     from methods.domain import host
     from metrics import chamfer
 
-    threads = []
+    calls = []
     points = PointSet(np.random.default_rng().random((50, 3)))
 
     class Tree:
         def query(self, src, k, workers):
-            threads.append(workers)
+            calls.append((workers, threading.current_thread() is threading.main_thread()))
             return np.zeros(len(src)), None
 
     points._tree = Tree()
     monkeypatch.setattr(host.os, "sched_getaffinity", lambda pid: {0, 3, 5}, raising=False)
     monkeypatch.setattr(host.os, "cpu_count", lambda: 224)
-    nearest_distances_m(np.zeros((4, 3)), points)
+    nearest_distances_m(np.zeros((100 * chamfer.MIN_CHUNK_POINTS, 3)), points)
+    assert chamfer._POOL[0][0] == 3                                   # the pool's threads: the process's cores
+    assert calls == [(1, False)] * 3                                  # one-thread queries, on pool threads
+    calls.clear()
+    nearest_distances_m(np.zeros((4, 3)), points)                     # too few points to hand over
     monkeypatch.setattr(chamfer, "QUERY_THREADS", 1)                 # a scoring worker's setting
-    nearest_distances_m(np.zeros((4, 3)), points)
-    assert threads == [3, 1]
+    nearest_distances_m(np.zeros((100 * chamfer.MIN_CHUNK_POINTS, 3)), points)
+    assert calls == [(1, True), (1, True)]
+
+
+def test_radar_points_from_bounds_per_axis_equal_the_pixel_points_inside_mask_bb():
+    from methods.domain.capture import RadarGrid
+    from metrics.evaluate import _pixel_points_m, _radar_points
+    from metrics.masks import inside_mask_bb
+
+    rng = np.random.default_rng()
+    grid = RadarGrid((-0.15, -0.12, 0.2), (0.15, 0.12, 0.4), (31, 25, 11))
+    for _ in range(20):
+        depth_m = 0.3 + rng.normal(0, 0.05, grid.image_shape)
+        for value in (np.nan, 0.0, np.inf, -np.inf):
+            depth_m[rng.random(depth_m.shape) < 0.05] = value
+        bounds = {"xmin": -0.1, "xmax": 0.08, "ymin": -0.05, "ymax": 0.11, "zmin": 0.28, "zmax": 0.33}
+        mask_bb_m = {key: value + rng.normal(0, 0.01) for key, value in bounds.items() if rng.random() < 0.7}
+        used = rng.random(depth_m.shape) < 0.8
+        points_m = _pixel_points_m(grid, np.nan_to_num(depth_m))        # the former way: every pixel's point
+        valid = np.isfinite(depth_m) & (depth_m != 0)
+        source_mask = valid & inside_mask_bb(points_m.reshape(-1, 3), mask_bb_m).reshape(valid.shape)
+        got_valid, got_source, got_points = _radar_points(depth_m, used, grid, mask_bb_m)
+        np.testing.assert_array_equal(got_valid, valid)
+        np.testing.assert_array_equal(got_source, source_mask)
+        expected = points_m[used & source_mask]
+        assert got_points.shape == expected.shape and got_points.dtype == np.float64
+        assert np.array_equal(got_points, expected)
