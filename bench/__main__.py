@@ -6,7 +6,8 @@ explicit `hydra.run.dir=` (with -m: `hydra.sweep.dir=`) that cannot be created e
 a traceback). A closed stdout (`python -m bench ... | head -1`) or Ctrl-C end quietly (bench.cli). Hydra's own
 messages for config mistakes (an unknown option of a group, with the list of options) are left as Hydra words them.
 
-Where the jobs run here on a Warp device, Warp starts on a thread of its own while Hydra starts (bench.warpstart).
+Where the jobs run here on a Warp device, Warp starts on a thread of its own while Hydra starts (bench.warpstart);
+on a host of several cores, the merge's worker and the output process start before Hydra too (bench.prestart).
 At its exit the process skips the interpreter's teardown of its modules and objects (`QuickExit`).
 """
 import atexit
@@ -14,7 +15,7 @@ import logging
 import os
 import sys
 
-from bench import cli, warpstart
+from bench import cli, prestart, warpstart
 from bench.harness import stages
 
 
@@ -81,9 +82,11 @@ def skip_mode_probe() -> None:
 def _main() -> None:
     stages.start_from_environment()    # python -m bench.perf experiment: seconds per stage, imports included
     logging.raiseExceptions = False    # a log line to a closed stdout is dropped, not a '--- Logging error ---' dump
-    if check_command_line(sys.argv[1:]):
+    multirun = check_command_line(sys.argv[1:])
+    if multirun:
         skip_mode_probe()
     warpstart.start_early(sys.argv[1:])
+    prestart.start(sys.argv[1:], multirun)
     from bench.harness.app import main
 
     main()

@@ -10,17 +10,22 @@ _threads: list[threading.Thread] = []
 NOT_RUNS = {"--cfg", "-c", "--info", "-i", "--help", "-h", "--hydra-help", "--shell-completion", "-sc"}
 
 
-def starts_early(argv: list[str]) -> bool:
-    """Whether this command runs jobs in this process on a Warp device: a run or multirun (not --cfg, --info,
-    --help or shell completion) whose command line asks for `device=cuda` or `auto` (alone or in a sweep list) and
-    keeps the jobs here (no `hydra/launcher=` other than the in-process ones: joblib's or SLURM's jobs start Warp in
-    their own processes, and a CUDA context here would only take GPU memory)."""
+def jobs_in_this_process(argv: list[str]) -> bool:
+    """Whether this command runs jobs in this process: a run or multirun (not --cfg, --info, --help or shell
+    completion) that keeps the jobs here (no `hydra/launcher=` other than the in-process ones: joblib's or SLURM's
+    jobs run in processes of their own)."""
     if any(arg.split("=", 1)[0] in NOT_RUNS for arg in argv):
         return False
     launchers = [arg.split("=", 1)[1] for arg in argv if arg.startswith("hydra/launcher=")]
-    if any(launcher not in IN_PROCESS_LAUNCHERS for launcher in launchers):
-        return False
-    return any(arg.startswith("device=") and any(name in arg for name in ("cuda", "auto")) for arg in argv)
+    return all(launcher in IN_PROCESS_LAUNCHERS for launcher in launchers)
+
+
+def starts_early(argv: list[str]) -> bool:
+    """Whether this command runs jobs in this process on a Warp device: `jobs_in_this_process` and the command line
+    asks for `device=cuda` or `auto` (alone or in a sweep list): a CUDA context here for jobs run elsewhere would only
+    take GPU memory."""
+    return jobs_in_this_process(argv) and any(
+        arg.startswith("device=") and any(name in arg for name in ("cuda", "auto")) for arg in argv)
 
 
 def _start_warp() -> None:

@@ -7,19 +7,23 @@ Sweep root after `python -m bench -m experiment=table3`: `results.csv` (every jo
 rest of the merge).
 `python -m bench.report.merge ROOT [--table NAME]` does the same for a sweep that was interrupted before the end.
 
-In a multirun the merge runs in a worker process (`Worker`, forked from the sweep's process) started when its first
-job ends: it imports what the merge needs beyond what the jobs imported (pandas, SciPy's statistics, matplotlib:
-~0.8 s on a quiet 2-core machine) while the other jobs run, then waits for the sweep root on a pipe; the callback
-hands it over at the multirun's end and waits for it. Its errors are its own lines on stderr and its exit code is the
-sweep's (as in one process).
+In a multirun the merge runs in a worker process that imports what the merge needs (pandas, SciPy's statistics,
+matplotlib: ~0.8 s on a quiet 2-core machine, ~1.5 s on the H100 host) while the jobs run, then waits for the sweep
+root on a pipe; the callback hands it over at the multirun's end and waits for it. On a host of several cores it is
+a fresh interpreter started before Hydra (`SpawnedWorker`, `prestart_worker`, bench.prestart: `python -m
+bench.report.merge --serve`), on fewer it is forked from the sweep's process when its first job ends (`Worker`:
+started earlier, its imports would compete with composing the jobs for the two cores). Its errors are its own lines
+on stderr and its exit code is the sweep's (as in one process).
 """
 from __future__ import annotations
 
+import atexit
 import csv
 import io
 import json
 import os
 import signal
+import subprocess
 import sys
 import threading
 import traceback
@@ -130,16 +134,7 @@ class Worker:
             raise
         if self.pid == 0:                    # the worker
             os.close(self._write_fd)
-            code = 1
-            try:
-                code = _serve(read_fd)
-            except KeyboardInterrupt:
-                code = cli.EXIT_INTERRUPTED
-            except BaseException:            # noqa: BLE001 -- a bug: its traceback, exit 1
-                traceback.print_exc()
-            finally:
-                sys.stderr.flush()
-                os._exit(code)     # without tearing down pandas, SciPy and matplotlib (~0.2 s the sweep would wait)
+            _serve_and_exit(read_fd)
         os.close(read_fd)
 
     def hand_over(self, request: dict | None) -> int:
@@ -165,6 +160,75 @@ def _warm_up() -> None:
     one_row = pd.DataFrame({"method": ["m"], "row": ["r"], "runtime_ms": [1.0], "P_cm": [1.0], "captures": [1],
                             "failed": [0]})
     plots.runtime_vs_error(one_row, io.BytesIO(), "")
+
+
+class SpawnedWorker:
+    """The merge's worker as a fresh interpreter (`python -m bench.report.merge --serve`; module doc), with `Worker`'s
+    protocol: the request on its stdin (EOF without one: it just exits), its exit code. Started before Hydra on a host
+    of several cores (bench.prestart), so the sweep's process, which holds a CUDA context and many threads by the
+    first job's end, is not forked for it. One never handed a request is ended with this process (`_end_unused`):
+    started for a command that then failed before its multirun, it would hold stderr until its imports were done."""
+
+    def __init__(self):
+        environment = {name: value for name, value in os.environ.items() if name != stages.ENV}
+        self._process = subprocess.Popen([sys.executable, "-m", "bench.report.merge", SERVE], stdin=subprocess.PIPE,
+                                         stdout=subprocess.DEVNULL, env=environment)
+        self.handed = False
+
+    def hand_over(self, request: dict | None) -> int:
+        """Send the request (None: nothing to merge) and wait for the worker's exit code."""
+        self.handed = True
+        try:
+            if request is not None:
+                self._process.stdin.write(json.dumps(request).encode())
+            self._process.stdin.close()
+        except BrokenPipeError:              # it ended early (its error is on stderr); its exit code says
+            pass
+        return self._process.wait()
+
+    def stop(self) -> None:
+        if not self.handed:
+            self._process.kill()
+            self._process.wait()
+
+
+SERVE = "--serve"          # python -m bench.report.merge --serve: a SpawnedWorker
+_spawned: list[SpawnedWorker] = []        # started by prestart_worker, in start order
+_waiting: list[SpawnedWorker] = []        # of those, the one no multirun has taken yet
+
+
+def prestart_worker() -> None:
+    """Start the merge's worker now (`SpawnedWorker`) for the multirun this process is about to run: its callback
+    takes it when the multirun starts (`MergeResults`). Where it cannot start, the callback forks one as on few
+    cores."""
+    try:
+        worker = SpawnedWorker()
+    except OSError:
+        return
+    if not _spawned:
+        atexit.register(_end_unused)
+    _spawned.append(worker)
+    _waiting.append(worker)
+
+
+def _end_unused() -> None:
+    for worker in _spawned:
+        worker.stop()
+
+
+def _serve_and_exit(read_fd: int) -> None:
+    """The worker's whole life (`_serve`), then its exit: 0, 2 after a user error, `cli.EXIT_INTERRUPTED` after
+    Ctrl-C, 1 after a bug (its traceback on stderr)."""
+    code = 1
+    try:
+        code = _serve(read_fd)
+    except KeyboardInterrupt:
+        code = cli.EXIT_INTERRUPTED
+    except BaseException:            # noqa: BLE001 -- a bug: its traceback, exit 1
+        traceback.print_exc()
+    finally:
+        sys.stderr.flush()
+        os._exit(code)     # without tearing down pandas, SciPy and matplotlib (~0.2 s the sweep would wait)
 
 
 def _serve(read_fd: int) -> int:
@@ -199,7 +263,7 @@ def start_worker() -> Worker | None:
         return None
 
 
-def finish_worker(worker: Worker, root: Path, table: str | None, depth_errors: bool) -> None:
+def finish_worker(worker: Worker | SpawnedWorker, root: Path, table: str | None, depth_errors: bool) -> None:
     """Hand the sweep to the worker and wait: its exit code 2 (one `error:` line of its own on stderr) ends this
     process with 2 too; any other failure is raised."""
     # resolved here: the worker was forked inside a job, whose working directory Hydra may have changed
@@ -216,16 +280,19 @@ def finish_worker(worker: Worker, root: Path, table: str | None, depth_errors: b
 
 class MergeResults(Callback):
     """Hydra callback (configs/config.yaml `hydra.callbacks.merge`): `report` at the end of every multirun, in the
-    worker (module doc) started when the multirun's first job ends in this process: not before, where its imports
-    would compete with composing the jobs and the first job's own imports (measured on 2 loaded cores: composition
-    0.5 -> 1.9 s), and not where the jobs run in other processes (joblib, SLURM), which merge here, in this process."""
+    worker (module doc): the one started before Hydra where there is one (`prestart_worker`, on several cores), else
+    one forked when the multirun's first job ends in this process: not before, where its imports would compete with
+    composing the jobs and the first job's own imports on two cores (measured on 2 loaded cores: composition 0.5 ->
+    1.9 s), and not where the jobs run in other processes (joblib, SLURM), which merge here, in this process."""
 
     def __init__(self):
-        self._worker: Worker | None = None
+        self._worker: Worker | SpawnedWorker | None = None
         self._sweep_pid: int | None = None
 
     def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
         self._sweep_pid = os.getpid()
+        if _waiting:                     # started before Hydra (prestart_worker): no fork after the first job
+            self._worker = _waiting.pop()
 
     def __getstate__(self) -> dict:
         """Copies sent to other processes (joblib, SLURM) never fork a worker: they carry no sweep process id."""
@@ -273,4 +340,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
+    if sys.argv[1:] == [SERVE]:
+        _serve_and_exit(sys.stdin.fileno())
     cli.run_guarded(main)
