@@ -131,6 +131,21 @@ def test_a_child_processes_cpu_time_is_read_from_proc():
     assert sizing.processes_cpu_s([]) == 0.0
 
 
+@pytest.mark.skipif(not os.path.isfile("/proc/stat"), reason="reads /proc")
+def test_the_machines_busy_time_is_proc_stats_first_line():
+    """busy_cpu_s reads /proc/stat with plain os.read (bench.harness.sizing._proc_bytes): the same seconds as its
+    first line read as text, taken just before and after; a file that cannot be read is None."""
+    def from_text() -> float:
+        with open("/proc/stat") as stat:
+            fields = [int(v) for v in stat.readline().split()[1:]]
+        return (sum(fields[:8]) - fields[3] - fields[4]) / os.sysconf("SC_CLK_TCK")
+
+    before = from_text()
+    busy_s = sizing.busy_cpu_s()
+    assert before <= busy_s <= from_text()
+    assert sizing._proc_bytes("/proc/no_such_file") is None
+
+
 def _parent_pid(pid: str) -> int | None:
     try:
         with open(f"/proc/{pid}/stat") as stat:
