@@ -18,6 +18,7 @@ import collections
 import dataclasses
 import math
 import os
+import threading
 import time
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -84,22 +85,35 @@ def busy_cpu_s() -> float:
 
 def descendants() -> list[int]:
     """The process ids of this process's children, theirs, and so on (/proc/<pid>/task/<tid>/children; empty off
-    Linux): the job's own helpers (a fork server, its pool workers), whose CPU time is the job's own."""
-    found, todo = [], [os.getpid()]
+    Linux): the job's own helpers (a fork server, its pool workers, the merge's worker), whose CPU time is the job's
+    own. This process's children are read from its Python threads' lists (`_own_threads`), its descendants' from
+    every thread's."""
+    found, todo = [], [(os.getpid(), _own_threads())]
     while todo:
-        pid = todo.pop()
-        try:
-            tasks = os.listdir(f"/proc/{pid}/task")
-        except OSError:
-            continue
-        for tid in tasks:
+        pid, tids = todo.pop()
+        for tid in tids:
             try:
                 new = [int(child) for child in _proc_bytes(f"/proc/{pid}/task/{tid}/children").split()]
             except (AttributeError, ValueError):     # gone (None) or unreadable
                 continue
             found += new
-            todo += new
+            todo += [(child, _threads(child)) for child in new]
     return found
+
+
+def _threads(pid: int) -> list[str]:
+    try:
+        return os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return []
+
+
+def _own_threads() -> set[int]:
+    """The threads of this process that can have started a child process: its Python threads (a fork, subprocess or
+    multiprocessing start runs on one; the children of one that ended are the main thread's, Linux hands them to the
+    thread group's leader). Not /proc/self/task, the list of every thread (the query pool's, CUDA's and BLAS's):
+    listing it took 1.6 ms a sample on the H100 host, 0.36 s of Table III's main thread."""
+    return {os.getpid(), *(thread.native_id for thread in threading.enumerate() if thread.native_id is not None)}
 
 
 def _proc_bytes(path: str) -> bytes | None:

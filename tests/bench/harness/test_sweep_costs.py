@@ -172,6 +172,45 @@ def test_descendants_are_children_and_their_children():
         child.communicate(b"")
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="reads /proc")
+def test_children_started_on_other_threads_are_descendants_while_and_after_those_run():
+    """This process's children are read from its Python threads (sizing._own_threads, not every thread's list): one
+    started by a thread that still runs, and one whose thread has ended (Linux hands it to the main thread), are
+    both found, as /proc/self/task's every thread finds them."""
+    import threading
+
+    def every_threads_children() -> set[int]:
+        return {int(child) for tid in os.listdir("/proc/self/task")
+                for child in (sizing._proc_bytes(f"/proc/self/task/{tid}/children") or b"").split()}
+
+    children, release = [], threading.Event()
+
+    def start_child(wait: bool) -> None:
+        children.append(subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"],
+                                         stdin=subprocess.PIPE))
+        if wait:
+            release.wait()
+
+    running = threading.Thread(target=start_child, args=(True,))
+    ended = threading.Thread(target=start_child, args=(False,))
+    try:
+        running.start()
+        ended.start()
+        ended.join()
+        deadline = time.monotonic() + 30
+        while len(children) < 2:
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        pids = {child.pid for child in children}
+        assert pids <= every_threads_children()
+        assert pids <= set(sizing.descendants())
+    finally:
+        release.set()
+        running.join()
+        for child in children:
+            child.communicate(b"")
+
+
 def test_stage_seconds_go_to_the_innermost_open_stage(monkeypatch):
     clock = iter([0.0, 1.0, 3.0, 6.0, 6.0, 10.0])
     monkeypatch.setattr(stages, "_on", True)
