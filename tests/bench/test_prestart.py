@@ -3,6 +3,7 @@ worker as a fresh interpreter (bench.report.merge.SpawnedWorker) and the output 
 without them."""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -57,7 +58,11 @@ def test_a_spawned_worker_merges_what_it_is_handed_and_relays_a_user_error(tmp_p
     assert exited.value.code == 2
     err = capfd.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and "cut mid-row" in err[0]
-    assert merge.SpawnedWorker().hand_over(None) == 0     # a multirun that ends without a merge: it just exits
+    idle = merge.SpawnedWorker()
+    if hasattr(os, "getpriority"):                       # its imports yield to the jobs
+        assert os.getpriority(os.PRIO_PROCESS, idle._process.pid) == merge.spawned_niceness(
+            os.getpriority(os.PRIO_PROCESS, 0))
+    assert idle.hand_over(None) == 0                     # a multirun that ends without a merge: it just exits
 
 
 def test_a_multirun_takes_the_worker_started_before_hydra_and_forks_none(monkeypatch):
