@@ -212,6 +212,8 @@ def prestart_worker() -> None:
     """Start the merge's worker now (`SpawnedWorker`) for the multirun this process is about to run: its callback
     takes it when the multirun starts (`MergeResults`). Where it cannot start, the callback forks one as on few
     cores."""
+    if not sys.executable:                 # an embedding interpreter that cannot start another
+        return
     try:
         worker = SpawnedWorker()
     except OSError:
