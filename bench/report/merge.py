@@ -162,6 +162,16 @@ def _warm_up() -> None:
     plots.runtime_vs_error(one_row, io.BytesIO(), "")
 
 
+SERVE = "--serve"          # python -m bench.report.merge --serve: a SpawnedWorker
+SPAWNED_NICENESS = 10      # a SpawnedWorker's priority below the jobs' (its imports, ~3 s of CPU on the H100 host,
+                           # overlapped the first jobs of Table III, whose KD-tree queries run a thread per core)
+
+
+def spawned_niceness(own: int) -> int:
+    """A SpawnedWorker's niceness for a sweep's process of niceness `own`: SPAWNED_NICENESS more, at most 19."""
+    return min(19, own + SPAWNED_NICENESS)
+
+
 class SpawnedWorker:
     """The merge's worker as a fresh interpreter (`python -m bench.report.merge --serve`; module doc), with `Worker`'s
     protocol: the request on its stdin (EOF without one: it just exits), its exit code. Started before Hydra on a host
@@ -196,14 +206,6 @@ class SpawnedWorker:
             self._process.wait()
 
 
-SERVE = "--serve"          # python -m bench.report.merge --serve: a SpawnedWorker
-SPAWNED_NICENESS = 10      # a SpawnedWorker's priority below the jobs' (its imports, ~3 s of CPU on the H100 host,
-                           # overlapped the first jobs of Table III, whose KD-tree queries run a thread per core)
-
-
-def spawned_niceness(own: int) -> int:
-    """A SpawnedWorker's niceness for a sweep's process of niceness `own`: SPAWNED_NICENESS more, at most 19."""
-    return min(19, own + SPAWNED_NICENESS)
 _spawned: list[SpawnedWorker] = []        # started by prestart_worker, in start order
 _waiting: list[SpawnedWorker] = []        # of those, the one no multirun has taken yet
 
