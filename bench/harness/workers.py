@@ -24,7 +24,7 @@ import multiprocessing
 import pickle
 import threading
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +38,7 @@ from metrics.resample import resample_depth_m, resample_nearest
 log = logging.getLogger("bench")
 MAX_AUTO_WORKERS = 6
 OUTPUT_PROCESS_MIN_CORES = 4
+OUTPUT_THREADS = 4      # the output process's threads for one capture: its depth files and its three arrays at once
 HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: 'auto' leaves them every core
 # what a worker imports before it takes work (in the fork server: once for all workers): scoring, the cell's HDF5,
 # the KD-trees and the depth previews' colour map
@@ -107,35 +108,58 @@ def _store(root: str):
 
 def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None
                     ) -> tuple[dict, bytes | None, dict[str, float]]:
-    """In a worker: score the reconstruction into `row` (its score columns), then `write` its files. Returns (row,
-    the arrays' image or None, seconds spent on metrics and outputs)."""
+    """In a worker: score the reconstruction into `row` (its score columns), then `write` its files (on this thread:
+    the workers share the cores). Returns (row, the arrays' image or None, seconds spent on metrics and outputs)."""
     started = time.perf_counter()
     scores, arrays = score(task)
     row.update(scores)
     scored = time.perf_counter()
-    row, image, seconds = write(row, arrays, task.metric_grid, out_dir, stem, grid_attrs, store_root)
+    row, image, seconds = write(row, arrays, task.metric_grid, out_dir, stem, grid_attrs, store_root, threads=0)
     return row, image, {"metrics": scored - started, **seconds}
 
 
 def write(row: dict, arrays: dict, grid: RadarGrid, out_dir: Path, stem: str, grid_attrs: dict,
-          store_root: str | None, arrays_attrs: dict | None = None) -> tuple[dict, bytes | None, dict[str, float]]:
+          store_root: str | None, arrays_attrs: dict | None = None, threads: int = OUTPUT_THREADS
+          ) -> tuple[dict, bytes | None, dict[str, float]]:
     """In a worker (or the output process, `output_process`): a scored capture's depth PNG, JSON and preview and,
     with a store, its cell (arrays, then the row). Returns (row, where there is no store to copy the arrays from,
     the cell's image, bench.harness.store.cell_image, else None, seconds spent on outputs). With `arrays_attrs`
     (the output process of a run without a store: the one writer of the run's arrays.h5, its tasks done in order)
-    the arrays go into `out_dir/arrays.h5` here, with these attributes, and no image is returned."""
-    from bench.harness.store import cell_image, write_arrays
+    the arrays go into `out_dir/arrays.h5` here, with these attributes, and no image is returned. With `threads`
+    (the output process: it has cores of its own) the depth files and each array's compression run on that many
+    threads of this process (zlib and the file writes release the interpreter lock), the HDF5 writing here after
+    them, in task order."""
+    from bench.harness.store import cell_image, compress_arrays, write_arrays
 
     started = time.perf_counter()
-    write_depth(out_dir, stem, arrays["depth_m"], grid)
+    threads_pool = _threads(threads)
+    if threads_pool is None:
+        write_depth(out_dir, stem, arrays["depth_m"], grid)
+        compressed = compress_arrays(arrays)
+    else:
+        depth = threads_pool.submit(write_depth, out_dir, stem, arrays["depth_m"], grid)
+        compressed = compress_arrays(arrays, threads_pool)
+        depth.result()
     image = None
     if store_root is not None:
-        _store(store_root).put(row["key"], row, arrays, grid_attrs)
+        _store(store_root).put(row["key"], row, compressed, grid_attrs)
     elif arrays_attrs is not None:
-        write_arrays(out_dir / "arrays.h5", stem, arrays, arrays_attrs)
+        write_arrays(out_dir / "arrays.h5", stem, compressed, arrays_attrs)
     else:
-        image = cell_image(arrays, grid_attrs)
+        image = cell_image(compressed, grid_attrs)
     return row, image, {"outputs": time.perf_counter() - started}
+
+
+_THREADS: dict[int, ThreadPoolExecutor] = {}
+
+
+def _threads(threads: int) -> ThreadPoolExecutor | None:
+    """This process's pool of `threads` threads for `write` (None for 0 or 1), started on first use."""
+    if threads <= 1:
+        return None
+    if threads not in _THREADS:
+        _THREADS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="outputs")
+    return _THREADS[threads]
 
 
 def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
