@@ -77,7 +77,7 @@ def _deflate_chunk(values: np.ndarray, start: int, rows: int) -> bytes:
     flat = _bits(block.reshape(-1))
     if flat is None or not (flat == flat[0]).all():
         return _deflate(np.ascontiguousarray(block))
-    key = (values.dtype.str, block.shape, flat[:1].tobytes())
+    key = (values.dtype.str, block.shape, flat[:1].tobytes(), LEVEL, STRATEGY)
     data = _constant.get(key)
     if data is None:
         data = _deflate(np.ascontiguousarray(block))
