@@ -19,7 +19,8 @@ its arrays, and an interrupted sweep loses no finished cell. HDF5 never writes t
 built in memory and written by Python, and the run's `arrays.h5` is appended through a file object that keeps a
 failed write from HDF5 (`_DeferredWriteErrors`); HDF5 that sees a failed write (a full disk, a file-size limit)
 ends the process in a segmentation fault, where here the write ends in one OSError naming the file, its partial
-file removed.
+file removed. The arrays are compressed before HDF5 sees them (bench.harness.h5chunks: gzip + shuffle chunks made by
+zlib on any thread, written with `write_direct_chunk`), so HDF5 only places them.
 
 The store is a trust boundary (anything may have been written into it): a cell is read only from regular files
 inside the store, its row must be a JSON object of the expected fields for this key, its HDF5 file may hold no
