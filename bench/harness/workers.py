@@ -170,7 +170,9 @@ def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
     H100 host its PNG, preview and HDF5 work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind
     the methods and metrics, and each job began by waiting for the last one's files (Table III: 5.2 s on the
     thread, 1.3 s waited for). The rows stay timed as they were (the thread did the same work beside the timed
-    calls)."""
+    calls). Since the arrays are compressed in Python (bench.harness.h5chunks) on OUTPUT_THREADS threads, a capture
+    takes this process ~12-13 ms (~21 ms of CPU; 39-40 ms before) on the H100 host, and the jobs no longer wait for
+    it (Table III: 1.4-1.6 s waited -> 0.05 s; docs/measurements/sweep.md)."""
     return None if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES else pool(1)
 
 
