@@ -124,8 +124,8 @@ def write(row: dict, arrays: dict, grid: RadarGrid, out_dir: Path, stem: str, gr
     """In a worker (or the output process, `output_process`): a scored capture's depth PNG, JSON and preview and,
     with a store, its cell (arrays, then the row). Returns (row, where there is no store to copy the arrays from,
     the cell's image, bench.harness.store.cell_image, else None, seconds spent on outputs). With `arrays_attrs`
-    (the output process of a run without a store: the one writer of the run's arrays.h5, its tasks done in order)
-    the arrays go into `out_dir/arrays.h5` here, with these attributes, and no image is returned. With `threads`
+    (the output process: the one writer of the run's arrays.h5, its tasks done in order) the arrays go into
+    `out_dir/arrays.h5` here too, with these attributes, and no image is returned. With `threads`
     (the output process: it has cores of its own) the depth files and each array's compression run on that many
     threads of this process (zlib and the file writes release the interpreter lock), the HDF5 writing here after
     them, in task order."""
@@ -143,11 +143,20 @@ def write(row: dict, arrays: dict, grid: RadarGrid, out_dir: Path, stem: str, gr
     image = None
     if store_root is not None:
         _store(store_root).put(row["key"], row, compressed, grid_attrs)
-    elif arrays_attrs is not None:
+    if arrays_attrs is not None:
         write_arrays(out_dir / "arrays.h5", stem, compressed, arrays_attrs)
-    else:
+    elif store_root is None:
         image = cell_image(compressed, grid_attrs)
     return row, image, {"outputs": time.perf_counter() - started}
+
+
+def copy_stored(store_root: str, key: str, path: Path, stem: str, attrs: dict) -> dict[str, float]:
+    """In the output process (the one writer of the run's arrays.h5, its tasks done in order): a stored cell's
+    arrays copied into `path` as group `stem` (bench.harness.store.Store.copy_arrays: ~4 ms a capture on the 2-core
+    machine, which the job's writer thread no longer spends beside the timed calls). Returns the seconds spent."""
+    started = time.perf_counter()
+    _store(store_root).copy_arrays(key, path, stem, attrs)
+    return {"outputs": time.perf_counter() - started}
 
 
 _THREADS: dict[int, ThreadPoolExecutor] = {}
@@ -163,8 +172,8 @@ def _threads(threads: int) -> ThreadPoolExecutor | None:
 
 
 def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
-    """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays (without a
-    store: into arrays.h5): one process (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES
+    """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays (into
+    arrays.h5, whose one writer it is: a stored cell's arrays are copied there too, `copy_stored`): one process (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES
     cores or more where the job runs alone, else None (the job's writer thread writes them, as on 2 cores, where a
     process would take a core from the methods). A thread shares the interpreter lock with the main thread: on the
     H100 host its PNG, preview and HDF5 work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind
