@@ -173,8 +173,9 @@ def _threads(threads: int) -> ThreadPoolExecutor | None:
 
 def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
     """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays (into
-    arrays.h5, whose one writer it is: a stored cell's arrays are copied there too, `copy_stored`): one process (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES
-    cores or more where the job runs alone, else None (the job's writer thread writes them, as on 2 cores, where a
+    arrays.h5, whose one writer it is: a stored cell's arrays are copied there too, `copy_stored`): one process
+    (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES cores or more where the job runs
+    alone, else None (the job's writer thread writes them, as on 2 cores, where a
     process would take a core from the methods). A thread shares the interpreter lock with the main thread: on the
     H100 host its PNG, preview and HDF5 work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind
     the methods and metrics, and each job began by waiting for the last one's files (Table III: 5.2 s on the
