@@ -5,6 +5,7 @@ ground truth are compressed once, and an array that only looks like a kept one i
 from __future__ import annotations
 
 import io
+import os
 import zlib
 
 import h5py
@@ -13,6 +14,8 @@ import pytest
 
 from bench.harness import h5chunks, store
 from bench.harness.store import ARRAY_NAMES, cell_image, compress_arrays, copy_cell, write_arrays
+
+from hostile_tools import REPO
 
 ATTRS = {"bb_min_m": [-0.15, -0.15, 0.2], "bb_max_m": [0.15, 0.15, 0.4], "grid_size": [301, 301, 201], "key": "k"}
 
@@ -161,3 +164,32 @@ def test_arrays_compressed_on_threads_are_those_compressed_here(tmp_path, thread
     store.write_arrays(tmp_path / "a.h5", "c", compressed, ATTRS)
     store.write_arrays(tmp_path / "b.h5", "c", arrays, ATTRS)
     assert _read(tmp_path / "a.h5") == _read(tmp_path / "b.h5")
+
+
+def test_a_failed_write_of_compressed_chunks_is_one_oserror_and_no_partial_file(tmp_path):
+    """The chunks are placed through the same guarded file object (bench.harness.store._update_h5): a file-size limit
+    (the failed write of a full disk) in the middle of a capture's arrays ends in one OSError naming arrays.h5, the
+    partial file removed; the process lives on (HDF5 that sees a failed write ends in a segmentation fault)."""
+    import subprocess
+    import sys
+
+    script = f"""
+import resource, numpy as np
+from bench.harness.store import ARRAY_NAMES, compress_arrays, write_arrays
+rng = np.random.default_rng()
+arrays = {{name: rng.random((301, 301)) for name in ARRAY_NAMES}}
+compressed = compress_arrays(arrays)
+resource.setrlimit(resource.RLIMIT_FSIZE, (1_000_000, 1_000_000))
+path = "{tmp_path}/arrays.h5"
+try:
+    for group in range(4):                     # ~2 MB of random maps a capture: the second one crosses the limit
+        write_arrays(path, f"c{{group}}", compressed if group % 2 else arrays)
+except OSError as err:
+    print("error:", err)
+"""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == f"error: {tmp_path}/arrays.h5: cannot write (File too large); the partial file " \
+                                  "was removed", proc.stdout
+    assert not (tmp_path / "arrays.h5").exists()
