@@ -454,9 +454,13 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]),
                                  tuple(map(int, attrs["grid_size"])))
                 result = workers.done((row, arrays, {}))
-            copied = owns_arrays and (hit is None or writing.submit(
-                workers.copy_stored, str(store.root), key, out_dir / "arrays.h5", _stem(row),
-                _arrays_attrs(grid, key)))
+            if not owns_arrays:
+                copied = False
+            elif hit is None:
+                copied = True          # written by the output process with the capture's other files (`_scored`)
+            else:                      # a stored cell's arrays, copied by the output process in capture order
+                copied = writing.submit(workers.copy_stored, str(store.root), key, out_dir / "arrays.h5", _stem(row),
+                                        _arrays_attrs(grid, key))
             rows.append({"object": row["object"], "distance": row["distance"], "cached": hit is not None})
             writer.submit(_finish, result, rows, len(rows) - 1, out_dir, grid, store, key, results_csv,
                           hit is None and writing is not None, job_log, copied)

@@ -2,7 +2,8 @@
 
 A dataset image is read through bench.maroon.safe_io (a regular file inside the dataset, within `image_bytes`); its
 width and height are taken from the header and refused beyond `image_pixels` before any pixel is decoded
-(Pillow's own decompression-bomb check, warning and error alike, ends in the same one-line DatasetError).
+(Pillow's own decompression-bomb check, warning and error alike, ends in the same one-line DatasetError). The PNGs
+a run writes are encoded here (`png_bytes`), not by Pillow.
 """
 from __future__ import annotations
 
@@ -86,13 +87,3 @@ def png_bytes(values: np.ndarray) -> bytes:
     return (b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", header)
             + _png_chunk(b"IDAT", zlib.compress(rows.tobytes(), PNG_COMPRESS_LEVEL)) + _png_chunk(b"IEND", b""))
 
-
-def write_uint16_png(path, values: np.ndarray) -> None:
-    """Write a (H, W) uint16 array as a 16-bit PNG into `path` (a path or a binary file object)."""
-    if values.dtype != np.uint16 or values.ndim != 2:
-        raise ValueError(f"expected a 2-D uint16 array, got {values.dtype} {values.shape}")
-    data = png_bytes(values)
-    if hasattr(path, "write"):
-        path.write(data)
-    else:
-        Path(path).write_bytes(data)
