@@ -14,7 +14,7 @@ arrays compress on several threads where there are cores (`compress_arrays`). Tw
   capture) reuses its chunks (`_recent`; candidates found by a sample of its elements, then compared whole).
 
 Chunks are bands of whole rows of about CHUNK_BYTES (h5py's auto chunks were 38 x 38 squares: 192 chunks for a
-capture, 40 % of them constant; bands of 20 rows: 48, as large a share constant, 30 % less zlib time). A partial
+capture, 40 % of them constant; bands of 20 rows: 48, as large a share constant, ~25 % less zlib time). A partial
 last band is padded with zeros, as HDF5 pads it. What a reader gets back (values, dtype, shape, the gzip and shuffle
 filters) is what `create_dataset(..., compression="gzip", compression_opts=LEVEL, shuffle=True)` writes; only the
 chunk shape differs.
