@@ -28,14 +28,9 @@ MIN_SLICE_POINTS = 64
 
 def slices(n_queries: int, n_points: int) -> tuple[int, int]:
     """(points a slice, slices) for `n_queries` queries among `n_points` > 0 points: every slice non-empty."""
-    wanted = max(1, min(-(-TARGET_THREADS // max(_groups(n_queries), 1)), n_points // MIN_SLICE_POINTS))
+    wanted = max(1, min(-(-TARGET_THREADS // max(n_queries, 1)), n_points // MIN_SLICE_POINTS))
     slice_points = -(-n_points // wanted)
     return slice_points, -(-n_points // slice_points)
-
-
-def _groups(n_queries: int) -> int:
-    """Threads a slice of the points takes (kernels.nearest_in_slices: QUERIES_PER_THREAD queries each)."""
-    return -(-n_queries // kernels.QUERIES_PER_THREAD)
 
 
 @functools.cache
@@ -72,7 +67,7 @@ def _launch(queries: DevicePoints, points: DevicePoints, nearest: wp.array, offs
     dev, pool = queries.wp_device, _buffers(queries.wp_device)
     best_d2 = pool.get("nearest.d2", _capacity(n_queries * n_slices), wp.float64)
     best_index = pool.get("nearest.index", _capacity(n_queries * n_slices), wp.int32)
-    wp.launch(kernels.nearest_in_slices, dim=_groups(n_queries) * n_slices,
+    wp.launch(kernels.nearest_in_slices, dim=n_queries * n_slices,
               inputs=[queries.array, points.array, n_queries, n_points, slice_points, best_d2, best_index], device=dev)
     wp.launch(kernels.pick_nearest, dim=n_queries, inputs=[best_d2, best_index, n_queries, n_slices, offset, nearest],
               device=dev)
