@@ -183,8 +183,7 @@ def nearest_both_ways_m(a_m: np.ndarray, b: PointSet, device: str = "cpu") -> tu
         from methods.backends.warp.nearest import DevicePoints
 
         a = DevicePoints(a_m)
-        to_b, to_a = _nearest_on_gpu((a, b), (b.device_points, a))
-        return to_b, to_a
+        return tuple(_nearest_on_gpu((a, b), (b.device_points, a)))
     a_m, threads = np.asarray(a_m, dtype=np.float64), _threads()
     if threads <= 1:
         return nearest_distances_m(a_m, b), _build_tree(a_m).query(b.points_m, k=1, workers=1)[0]
