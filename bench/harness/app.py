@@ -489,7 +489,7 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
     process's seconds by stage)."""
     if pool is None:
         with stages.stage("metrics"):
-            scores, arrays = workers.score(task)
+            scores, arrays = workers.score(task, row["device"])     # the methods' device (Warp started on CUDA)
         row.update(scores)
         if writing is not None:
             return writing.submit(workers.write, row, arrays, grid, out_dir, _stem(row), _grid_attrs(grid),

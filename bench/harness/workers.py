@@ -86,11 +86,13 @@ def shipped(gt: GroundTruth | None) -> GroundTruth | Pickled | None:
     return _SHIPPED[id(gt)][1]
 
 
-def score(task: Scoring) -> tuple[dict, dict]:
-    """(metric columns, arrays on the metric grid: depth_m, magnitude, gt_depth_m) of a reconstruction."""
+def score(task: Scoring, device: str = "cpu") -> tuple[dict, dict]:
+    """(metric columns, arrays on the metric grid: depth_m, magnitude, gt_depth_m) of a reconstruction; `device`:
+    the sweep's, where its methods run in this process ("cuda": the nearest points searched on the GPU, the same
+    numbers; metrics.chamfer.on_gpu), else the default (a worker process: the KD-tree)."""
     depth_m = resample_depth_m(task.depth_m, task.computed_grid, task.metric_grid)
     if task.gt is not None:
-        scores, gt_depth_m = evaluate(depth_m, task.gt, faithful=task.faithful), task.gt.depth_m
+        scores, gt_depth_m = evaluate(depth_m, task.gt, faithful=task.faithful, device=device), task.gt.depth_m
     else:
         scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
     magnitude = resample_nearest(task.magnitude, task.computed_grid, task.metric_grid)
