@@ -9,9 +9,15 @@ distances are those of one query bit for bit. SciPy's own `workers=N` starts N t
 224 queries a sweep: 3,584 thread starts on a 16-core host; a 64-point query with 16 costs ~1.4 ms against 0.09 ms
 on one) and splits the points into N contiguous runs, of which the one over a method's off-object clutter takes
 longest while the others wait (Table III's 112 rows scored on the H100 host: 16.0-17.1 -> 12.5-13.4 ms a row).
+
+Where the sweep runs on CUDA (`on_gpu`), the nearest point of every query is found by brute force on the GPU
+instead (methods.backends.warp.nearest; the ground truth's points kept there with its PointSet) and each pair's
+distance computed here with the KD-tree's own formula (`distances_m`): the same distances bit for bit. Any other
+device keeps the KD-tree and never imports Warp.
 """
 from __future__ import annotations
 
+import functools
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -23,6 +29,8 @@ from methods.domain.host import usable_cores
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
+
+    from methods.backends.warp.nearest import DevicePoints
 
 
 #: threads of a nearest-neighbour query; None: one per core the process may run on (`usable_cores`; not SciPy's
@@ -40,16 +48,63 @@ MIN_CHUNK_POINTS = 512
 
 @dataclass
 class PointSet:
-    """(N, 3) points in metres with their KD-tree, built on first use."""
+    """(N, 3) points in metres with their KD-tree and their copy on the CUDA device, each made on first use."""
 
     points_m: np.ndarray
     _tree: cKDTree | None = field(default=None, repr=False)
+    _device: DevicePoints | None = field(default=None, repr=False, compare=False)
 
     @property
     def tree(self) -> cKDTree:
         if self._tree is None:
             self._tree = _build_tree(self.points_m)
         return self._tree
+
+    @property
+    def device_points(self) -> DevicePoints:
+        """The points on the first CUDA device (one upload for every row scored against them)."""
+        if self._device is None:
+            from methods.backends.warp.nearest import DevicePoints
+
+            self._device = DevicePoints(self.points_m)
+        return self._device
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_device": None}       # device memory stays in its process (scoring workers)
+
+
+def distances_m(d_m: np.ndarray) -> np.ndarray:
+    """Lengths (m) of difference vectors (..., 3), summed as SciPy's cKDTree sums them for p = 2 (((0 + dx^2) +
+    dy^2) + dz^2, then the square root): the distance of a pair the GPU found equals the tree's bit for bit."""
+    return np.sqrt((d_m[..., 0] * d_m[..., 0] + d_m[..., 1] * d_m[..., 1]) + d_m[..., 2] * d_m[..., 2])
+
+
+def on_gpu(device: str) -> bool:
+    """Whether a sweep on `device` (methods.backends.resolve_device's names) searches nearest points on the GPU:
+    "cuda" where Warp sees a CUDA device (the sweep started it); any other device the KD-tree, without Warp."""
+    return device == "cuda" and _cuda_seen()
+
+
+@functools.cache
+def _cuda_seen() -> bool:
+    try:
+        from methods.backends.warp.runtime import cuda_available
+    except ImportError:
+        return False
+    return cuda_available()
+
+
+def _nearest_on_gpu(*pairs: tuple[np.ndarray, PointSet | DevicePoints]) -> list[np.ndarray]:
+    """For each (source points (m), destination), the distance of every source point to its nearest destination
+    point, found on the GPU (inf without destination points, as the KD-tree gives it)."""
+    from methods.backends.warp.nearest import DevicePoints, nearest_indices
+
+    pairs = [(src if isinstance(src, DevicePoints) else DevicePoints(src),
+              dst.device_points if isinstance(dst, PointSet) else dst) for src, dst in pairs]
+    searched = [(src, dst) for src, dst in pairs if len(dst)]
+    found = iter(nearest_indices(*searched))
+    return [distances_m(src.points_m - dst.points_m[next(found)]) if len(dst) else np.full(len(src), np.inf)
+            for src, dst in pairs]
 
 
 def _build_tree(points_m: np.ndarray) -> cKDTree:
@@ -109,17 +164,26 @@ def _wait(futures: list[Future]) -> None:
         future.result()
 
 
-def nearest_distances_m(src_m: np.ndarray, dst: PointSet) -> np.ndarray:
-    """Distance (m) from every source point to its nearest destination point; (N,) float64."""
+def nearest_distances_m(src_m: np.ndarray, dst: PointSet, device: str = "cpu") -> np.ndarray:
+    """Distance (m) from every source point to its nearest destination point; (N,) float64. `device`: the sweep's
+    (`on_gpu`)."""
+    if on_gpu(device):
+        return _nearest_on_gpu((src_m, dst))[0]
     distances, futures = _submit(dst.tree, np.asarray(src_m, dtype=np.float64), _threads())
     _wait(futures)
     return distances
 
 
-def nearest_both_ways_m(a_m: np.ndarray, b: PointSet) -> tuple[np.ndarray, np.ndarray]:
+def nearest_both_ways_m(a_m: np.ndarray, b: PointSet, device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
     """(nearest distances (m) from every point of `a_m` to `b`, from every point of `b` to `a_m`): the same as two
     `nearest_distances_m` calls (`a_m`'s tree as PointSet builds it), with `a_m`'s tree built on a pool thread
-    while the first direction's chunks run. Both sets non-empty."""
+    while the first direction's chunks run; on the GPU (`on_gpu(device)`) `a_m` uploaded once for both. Both sets
+    non-empty."""
+    if on_gpu(device):
+        from methods.backends.warp.nearest import DevicePoints
+
+        a = DevicePoints(a_m)
+        return tuple(_nearest_on_gpu((a, b), (b.device_points, a)))
     a_m, threads = np.asarray(a_m, dtype=np.float64), _threads()
     if threads <= 1:
         return nearest_distances_m(a_m, b), _build_tree(a_m).query(b.points_m, k=1, workers=1)[0]

@@ -10,7 +10,7 @@ computed on another grid is resampled first, metrics.resample):
 * the object's silhouette: ground-truth pixels inside `mask_bb`, closed with the erosion kernel (fills gaps
   narrower than it); the eroded silhouette: the silhouette eroded by MAROON's kernel converted to millimetres
   (metrics.masks) - the same region for every method, whatever its own validity mask looks like;
-* C_s = Chamfer(radar -> GT), C_g = Chamfer(GT -> radar) with KD-trees;
+* C_s = Chamfer(radar -> GT), C_g = Chamfer(GT -> radar) with KD-trees (on a CUDA sweep by brute force on the GPU);
 * P = mean |D_radar - D_gt| over radar points on the silhouette with ground truth; P_e the same on the eroded
   silhouette;
 * off = share (%) of the triangulated radar points off the silhouette or outside mask_bb (false positives: the
@@ -216,25 +216,25 @@ def reference_projective(depth_m: np.ndarray, used: np.ndarray, source_mask: np.
     return float(np.mean(np.abs(errors_mm[counted])) / 10.0), int(counted.sum())
 
 
-def _chamfers_cm(radar_points_m: np.ndarray, off: np.ndarray, gt_points: PointSet, sound_points: PointSet
-                 ) -> tuple[float, float, float]:
+def _chamfers_cm(radar_points_m: np.ndarray, off: np.ndarray, gt_points: PointSet, sound_points: PointSet,
+                 device: str = "cpu") -> tuple[float, float, float]:
     """C_g and C_s (cm: `gt_points` to `radar_points_m` and back) and off_err (cm: the radar points flagged `off`,
     off the object, to the sound ground truth's points). Where both go to the same points (the sound profile) the
     off points' distances are picked from C_s's query, not queried again: the same numbers, since a point's nearest
-    distance does not depend on the other points of its query."""
+    distance does not depend on the other points of its query. `device`: the sweep's (metrics.chamfer.on_gpu)."""
     off_points_m = radar_points_m[off]
     if not len(radar_points_m) or not len(gt_points.points_m):
         c_g_cm = c_s_cm = float("nan")
         to_gt_m = None
     else:
-        to_gt_m, to_radar_m = nearest_both_ways_m(radar_points_m, gt_points)
+        to_gt_m, to_radar_m = nearest_both_ways_m(radar_points_m, gt_points, device)
         c_g_cm, c_s_cm = float(np.mean(to_radar_m)) * 100.0, float(np.mean(to_gt_m)) * 100.0
     if not len(off_points_m) or not len(sound_points.points_m):
         off_err_cm = float("nan")
     elif gt_points is sound_points and to_gt_m is not None:
         off_err_cm = float(np.mean(to_gt_m[off])) * 100.0
     else:
-        off_err_cm = float(np.mean(nearest_distances_m(off_points_m, sound_points))) * 100.0
+        off_err_cm = float(np.mean(nearest_distances_m(off_points_m, sound_points, device))) * 100.0
     return c_g_cm, c_s_cm, off_err_cm
 
 
@@ -264,9 +264,11 @@ def _failure(depth_m: np.ndarray, used: np.ndarray, selected: np.ndarray, scores
     return f"{', '.join(missing)}: no point to compare" if missing else ""
 
 
-def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> dict[str, float | int | str]:
+def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False, device: str = "cpu"
+             ) -> dict[str, float | int | str]:
     """Metrics (cm), off-object share (%), pixel counts and `failure` for a depth map (metres, NaN = invalid) on
-    `gt.grid`; the keys are SCORE_COLUMNS."""
+    `gt.grid`; the keys are SCORE_COLUMNS. `device`: the sweep's; "cuda" finds the Chamfer distances' nearest
+    points on the GPU (metrics.chamfer.on_gpu: the same numbers)."""
     depth_m = np.asarray(depth_m, dtype=np.float64)
     if depth_m.shape != gt.grid.image_shape:
         raise ValueError(f"depth map {depth_m.shape} does not match the ground-truth grid {gt.grid.image_shape}")
@@ -288,7 +290,7 @@ def evaluate(depth_m: np.ndarray, gt: GroundTruth, faithful: bool = False) -> di
     outside = used & ~selected
     counted = selected.sum() + outside.sum()
     silhouette_px = int(gt.silhouette.sum())
-    c_g_cm, c_s_cm, off_err_cm = _chamfers_cm(radar_points_m, off[selected], gt_points, gt.points)
+    c_g_cm, c_s_cm, off_err_cm = _chamfers_cm(radar_points_m, off[selected], gt_points, gt.points, device)
     scores = {
         "C_g_cm": c_g_cm,
         "C_s_cm": c_s_cm,

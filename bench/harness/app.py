@@ -18,6 +18,7 @@ import socket
 import statistics
 import tempfile
 import time
+from concurrent.futures import Future
 from pathlib import Path
 
 import h5py
@@ -417,9 +418,9 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
     if pool is not None:
         timing = "parallel"              # the workers share the host with the timed calls (bench.harness.workers)
     writing = pool or workers.output_process(shared=timing == "parallel")     # writes the depth files elsewhere
-    # without a store every row is computed and goes through the output process, whose tasks run one after another:
-    # it writes arrays.h5 too (with a store, rows read from it are copied into arrays.h5 here: one writer only)
-    owns_arrays = pool is None and writing is not None and store is None
+    # the output process's tasks run one after another, in the order handed: it is the one writer of arrays.h5
+    # (a computed capture's arrays as it compresses them, a stored cell's copied there), in capture order
+    owns_arrays = pool is None and writing is not None
     rows, results_csv, writer, job_log = [], ResultsCsv(out_dir / "results.csv"), BackgroundWriter(), _JobLog()
     with stages.stage("reading"):
         todo = [(d, f) for d in _capture_dirs(cfg.dataset, root) for f in _frames(d, spec)]
@@ -453,9 +454,16 @@ def run(cfg: DictConfig, out_dir: Path, *, generate: bool = False, timing: str =
                 grid = RadarGrid(tuple(attrs["bb_min_m"]), tuple(attrs["bb_max_m"]),
                                  tuple(map(int, attrs["grid_size"])))
                 result = workers.done((row, arrays, {}))
+            if not owns_arrays:
+                copied = False
+            elif hit is None:
+                copied = True          # written by the output process with the capture's other files (`_scored`)
+            else:                      # a stored cell's arrays, copied by the output process in capture order
+                copied = writing.submit(workers.copy_stored, str(store.root), key, out_dir / "arrays.h5", _stem(row),
+                                        _arrays_attrs(grid, key))
             rows.append({"object": row["object"], "distance": row["distance"], "cached": hit is not None})
             writer.submit(_finish, result, rows, len(rows) - 1, out_dir, grid, store, key, results_csv,
-                          hit is None and writing is not None, job_log, hit is None and owns_arrays)
+                          hit is None and writing is not None, job_log, copied)
     except BaseException:
         with stages.stage("outputs"):
             writer.close()
@@ -481,7 +489,7 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
     process's seconds by stage)."""
     if pool is None:
         with stages.stage("metrics"):
-            scores, arrays = workers.score(task)
+            scores, arrays = workers.score(task, row["device"])     # the methods' device (Warp started on CUDA)
         row.update(scores)
         if writing is not None:
             return writing.submit(workers.write, row, arrays, grid, out_dir, _stem(row), _grid_attrs(grid),
@@ -496,20 +504,21 @@ def _scored(task: workers.Scoring, row: dict, grid: RadarGrid, out_dir: Path, st
 
 
 def _finish(result, rows: list[dict], index: int, out_dir: Path, grid: RadarGrid, store: Store | None,
-            key: str | None, results_csv: ResultsCsv, by_worker: bool, job_log, arrays_by_worker: bool = False
-            ) -> None:
+            key: str | None, results_csv: ResultsCsv, by_worker: bool, job_log,
+            arrays_by_worker: bool | Future = False) -> None:
     """On the writer thread, in capture order: the capture's scored row (waiting for its worker, which wrote its
-    depth files: `by_worker`, and its arrays into arrays.h5: `arrays_by_worker`) as entry `index` of the run's
-    `rows`, and its files (`_write_outputs`)."""
+    depth files: `by_worker`, and its arrays into arrays.h5: `arrays_by_worker`, a future where the output process
+    copies a stored cell's) as entry `index` of the run's `rows`, and its files (`_write_outputs`)."""
     row, arrays, worker_s = result.result()
-    for stage, seconds in worker_s.items():
+    copied_s = arrays_by_worker.result() if isinstance(arrays_by_worker, Future) else {}
+    for stage, seconds in [*worker_s.items(), *copied_s.items()]:
         stages.add_background(stage, seconds)
     # one item assignment: a reader of `rows` on another thread sees the placeholder or the whole row, never a half
     cached = rows[index]["cached"]
     entry = {**row, "cached": cached}
     rows[index] = entry
     _write_outputs(out_dir, entry, arrays, grid, store, key, results_csv, depth_written=by_worker,
-                   arrays_written=arrays_by_worker)
+                   arrays_written=bool(arrays_by_worker))
     if not cached:
         job_log("%s/%s: computed, %d valid pixels, %.1f ms, P %.2f cm, C_s %.2f cm", row["object"], row["distance"],
                 row["valid_px"], row["runtime_ms"], row["P_cm"], row["C_s_cm"])

@@ -26,7 +26,8 @@ import math
 from omegaconf import DictConfig
 
 BASE_MIB = 360.0            # measured 249-269 MiB (one capture), 285-354 MiB (two; 350-354 in a full test run,
-                            # unexplained: the base keeps ~10 % above that)
+                            # unexplained: the base keeps ~10 % above that); 246-251 MiB (two) a day later on the
+                            # same machine and commit, the highest figure kept
 FRAME_MIB = 35.0            # measured 31-36 MiB per further capture frame
 BP_VOXEL_BYTES = 11.5       # measured 11.3 B (BP d05, one capture: 466 MiB on the paper grid, 265 MiB on bp_cpu)
 RANGE_TABLE_MIB = 8836 * 2048 * 8 / 2**20   # BP_max's range profiles: pairs x 16 x 128 samples x complex64

@@ -19,7 +19,8 @@ its arrays, and an interrupted sweep loses no finished cell. HDF5 never writes t
 built in memory and written by Python, and the run's `arrays.h5` is appended through a file object that keeps a
 failed write from HDF5 (`_DeferredWriteErrors`); HDF5 that sees a failed write (a full disk, a file-size limit)
 ends the process in a segmentation fault, where here the write ends in one OSError naming the file, its partial
-file removed.
+file removed. The arrays are compressed before HDF5 sees them (bench.harness.h5chunks: gzip + shuffle chunks made by
+zlib on any thread, written with `write_direct_chunk`), so HDF5 only places them.
 
 The store is a trust boundary (anything may have been written into it): a cell is read only from regular files
 inside the store, its row must be a JSON object of the expected fields for this key, its HDF5 file may hold no
@@ -46,7 +47,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from bench.harness import atomic
+from bench.harness import atomic, h5chunks
 from bench.harness.codeversion import code_version  # noqa: F401 -- part of a cell's key (bench.harness.app)
 from bench.maroon import reader as maroon
 from bench.maroon import safe_io
@@ -220,8 +221,9 @@ class Store:
             copy_cell(source, path, group, attrs)
 
 
-def cell_image(arrays: dict[str, np.ndarray], attrs: dict) -> bytes:
-    """A cell's HDF5 file as bytes: the arrays compressed as `write_arrays` compresses them, with `attrs`."""
+def cell_image(arrays: dict, attrs: dict) -> bytes:
+    """A cell's HDF5 file as bytes: the arrays (or `compress_arrays`' of them) as `write_arrays` writes them, with
+    `attrs`."""
     image = io.BytesIO()
     with h5py.File(image, "w") as h5:
         _fill(h5, "/", arrays, attrs)
@@ -366,15 +368,22 @@ def _replace_group(h5: h5py.File, group: str) -> h5py.Group:
     return h5.require_group(group)
 
 
-def _fill(h5: h5py.File, group: str, arrays: dict[str, np.ndarray], attrs: dict | None) -> None:
+def compress_arrays(arrays: dict[str, np.ndarray], pool=None) -> dict:
+    """A capture's arrays compressed as `write_arrays` stores them (bench.harness.h5chunks; on `pool`'s threads
+    where given), for `write_arrays` or `cell_image` in any thread; the ground truth's depth map, the same in every
+    cell of a capture, compressed once for them."""
+    return h5chunks.compress_arrays(arrays, repeated=("gt_depth_m",), pool=pool)
+
+
+def _fill(h5: h5py.File, group: str, arrays: dict, attrs: dict | None) -> None:
     node = _replace_group(h5, group)
-    for name, values in arrays.items():
-        # gzip level 1: a cell's mostly-NaN maps shrink 13x as with the default level 4, in 2/3 of its time
-        node.create_dataset(name, data=np.asarray(values), compression="gzip", compression_opts=1, shuffle=True)
+    for name, values in compress_arrays(arrays).items():
+        h5chunks.write(node, name, values)
     node.attrs.update(attrs or {})
 
 
-def write_arrays(path: Path, group: str, arrays: dict[str, np.ndarray], attrs: dict | None = None) -> None:
-    """Add (or replace) `group` in the HDF5 file `path` with compressed datasets (dtype kept) and attributes; a
-    failed write is one OSError naming `path` (`_update_h5`)."""
+def write_arrays(path: Path, group: str, arrays: dict, attrs: dict | None = None) -> None:
+    """Add (or replace) `group` in the HDF5 file `path` with gzip + shuffle compressed datasets (dtype kept; arrays,
+    or what `compress_arrays` made of them) and attributes; a failed write is one OSError naming `path`
+    (`_update_h5`)."""
     _update_h5(Path(path), lambda h5: _fill(h5, group, arrays, attrs))

@@ -24,7 +24,7 @@ import multiprocessing
 import pickle
 import threading
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +38,7 @@ from metrics.resample import resample_depth_m, resample_nearest
 log = logging.getLogger("bench")
 MAX_AUTO_WORKERS = 6
 OUTPUT_PROCESS_MIN_CORES = 4
+OUTPUT_THREADS = 4      # the output process's threads for one capture: its depth files and its three arrays at once
 HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: 'auto' leaves them every core
 # what a worker imports before it takes work (in the fork server: once for all workers): scoring, the cell's HDF5,
 # the KD-trees and the depth previews' colour map
@@ -85,11 +86,13 @@ def shipped(gt: GroundTruth | None) -> GroundTruth | Pickled | None:
     return _SHIPPED[id(gt)][1]
 
 
-def score(task: Scoring) -> tuple[dict, dict]:
-    """(metric columns, arrays on the metric grid: depth_m, magnitude, gt_depth_m) of a reconstruction."""
+def score(task: Scoring, device: str = "cpu") -> tuple[dict, dict]:
+    """(metric columns, arrays on the metric grid: depth_m, magnitude, gt_depth_m) of a reconstruction; `device`:
+    the sweep's, where its methods run in this process ("cuda": the nearest points searched on the GPU, the same
+    numbers; metrics.chamfer.on_gpu), else the default (a worker process: the KD-tree)."""
     depth_m = resample_depth_m(task.depth_m, task.computed_grid, task.metric_grid)
     if task.gt is not None:
-        scores, gt_depth_m = evaluate(depth_m, task.gt, faithful=task.faithful), task.gt.depth_m
+        scores, gt_depth_m = evaluate(depth_m, task.gt, faithful=task.faithful, device=device), task.gt.depth_m
     else:
         scores, gt_depth_m = no_ground_truth_scores("no photogrammetry mesh"), depth_m * float("nan")
     magnitude = resample_nearest(task.magnitude, task.computed_grid, task.metric_grid)
@@ -107,46 +110,81 @@ def _store(root: str):
 
 def score_and_write(task: Scoring, row: dict, out_dir: Path, stem: str, grid_attrs: dict, store_root: str | None
                     ) -> tuple[dict, bytes | None, dict[str, float]]:
-    """In a worker: score the reconstruction into `row` (its score columns), then `write` its files. Returns (row,
-    the arrays' image or None, seconds spent on metrics and outputs)."""
+    """In a worker: score the reconstruction into `row` (its score columns), then `write` its files (on this thread:
+    the workers share the cores). Returns (row, the arrays' image or None, seconds spent on metrics and outputs)."""
     started = time.perf_counter()
     scores, arrays = score(task)
     row.update(scores)
     scored = time.perf_counter()
-    row, image, seconds = write(row, arrays, task.metric_grid, out_dir, stem, grid_attrs, store_root)
+    row, image, seconds = write(row, arrays, task.metric_grid, out_dir, stem, grid_attrs, store_root, threads=0)
     return row, image, {"metrics": scored - started, **seconds}
 
 
 def write(row: dict, arrays: dict, grid: RadarGrid, out_dir: Path, stem: str, grid_attrs: dict,
-          store_root: str | None, arrays_attrs: dict | None = None) -> tuple[dict, bytes | None, dict[str, float]]:
+          store_root: str | None, arrays_attrs: dict | None = None, threads: int = OUTPUT_THREADS
+          ) -> tuple[dict, bytes | None, dict[str, float]]:
     """In a worker (or the output process, `output_process`): a scored capture's depth PNG, JSON and preview and,
     with a store, its cell (arrays, then the row). Returns (row, where there is no store to copy the arrays from,
     the cell's image, bench.harness.store.cell_image, else None, seconds spent on outputs). With `arrays_attrs`
-    (the output process of a run without a store: the one writer of the run's arrays.h5, its tasks done in order)
-    the arrays go into `out_dir/arrays.h5` here, with these attributes, and no image is returned."""
-    from bench.harness.store import cell_image, write_arrays
+    (the output process: the one writer of the run's arrays.h5, its tasks done in order) the arrays go into
+    `out_dir/arrays.h5` here too, with these attributes, and no image is returned. With `threads`
+    (the output process: it has cores of its own) the depth files and each array's compression run on that many
+    threads of this process (zlib and the file writes release the interpreter lock), the HDF5 writing here after
+    them, in task order."""
+    from bench.harness.store import cell_image, compress_arrays, write_arrays
 
     started = time.perf_counter()
-    write_depth(out_dir, stem, arrays["depth_m"], grid)
+    threads_pool = _threads(threads)
+    if threads_pool is None:
+        write_depth(out_dir, stem, arrays["depth_m"], grid)
+        compressed = compress_arrays(arrays)
+    else:
+        depth = threads_pool.submit(write_depth, out_dir, stem, arrays["depth_m"], grid)
+        compressed = compress_arrays(arrays, threads_pool)
+        depth.result()
     image = None
     if store_root is not None:
-        _store(store_root).put(row["key"], row, arrays, grid_attrs)
-    elif arrays_attrs is not None:
-        write_arrays(out_dir / "arrays.h5", stem, arrays, arrays_attrs)
-    else:
-        image = cell_image(arrays, grid_attrs)
+        _store(store_root).put(row["key"], row, compressed, grid_attrs)
+    if arrays_attrs is not None:
+        write_arrays(out_dir / "arrays.h5", stem, compressed, arrays_attrs)
+    elif store_root is None:
+        image = cell_image(compressed, grid_attrs)
     return row, image, {"outputs": time.perf_counter() - started}
 
 
+def copy_stored(store_root: str, key: str, path: Path, stem: str, attrs: dict) -> dict[str, float]:
+    """In the output process (the one writer of the run's arrays.h5, its tasks done in order): a stored cell's
+    arrays copied into `path` as group `stem` (bench.harness.store.Store.copy_arrays: ~4 ms a capture on the 2-core
+    machine, which the job's writer thread no longer spends beside the timed calls). Returns the seconds spent."""
+    started = time.perf_counter()
+    _store(store_root).copy_arrays(key, path, stem, attrs)
+    return {"outputs": time.perf_counter() - started}
+
+
+_THREADS: dict[int, ThreadPoolExecutor] = {}
+
+
+def _threads(threads: int) -> ThreadPoolExecutor | None:
+    """This process's pool of `threads` threads for `write` (None for 0 or 1), started on first use."""
+    if threads <= 1:
+        return None
+    if threads not in _THREADS:
+        _THREADS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="outputs")
+    return _THREADS[threads]
+
+
 def output_process(shared: bool = False) -> ProcessPoolExecutor | None:
-    """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays (without a
-    store: into arrays.h5): one process (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES
-    cores or more where the job runs alone, else None (the job's writer thread writes them, as on 2 cores, where a
+    """Where a job without scoring workers writes each capture's depth files, cell and compressed arrays (into
+    arrays.h5, whose one writer it is: a stored cell's arrays are copied there too, `copy_stored`): one process
+    (`write`, the pool of 1, started once) on a host of OUTPUT_PROCESS_MIN_CORES cores or more where the job runs
+    alone, else None (the job's writer thread writes them, as on 2 cores, where a
     process would take a core from the methods). A thread shares the interpreter lock with the main thread: on the
     H100 host its PNG, preview and HDF5 work took 46 ms a capture (~25 ms on an idle 2-core machine), fell behind
     the methods and metrics, and each job began by waiting for the last one's files (Table III: 5.2 s on the
     thread, 1.3 s waited for). The rows stay timed as they were (the thread did the same work beside the timed
-    calls)."""
+    calls). Since the arrays are compressed in Python (bench.harness.h5chunks) on OUTPUT_THREADS threads, a capture
+    takes this process ~12-13 ms (~21 ms of CPU; 39-40 ms before) on the H100 host, and the jobs no longer wait for
+    it (Table III: 1.4-1.6 s waited -> 0.05 s; docs/measurements/sweep.md)."""
     return None if shared or usable_cores() < OUTPUT_PROCESS_MIN_CORES else pool(1)
 
 

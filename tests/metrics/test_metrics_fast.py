@@ -1,13 +1,16 @@
 """The metrics' fast paths against plain references on fresh random inputs: the grid triangulation as masks against
 a per-quad loop of the rule as written (methods.domain.lattice's doc), the KD-tree's nearest distances against brute
-force where the radar points lie centimetres off a ground-truth lattice surface (the sliding-midpoint tree's case)."""
+force where the radar points lie centimetres off a ground-truth lattice surface (the sliding-midpoint tree's case),
+the GPU's nearest points (a CUDA sweep's) against both, and which devices use which."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from methods.domain.lattice import lattice_triangles, triangulated_vertices
-from metrics.chamfer import PointSet, nearest_distances_m
+from metrics.chamfer import PointSet, distances_m, nearest_distances_m
+
+from devices import CUDA
 
 
 def _loop_vertices(z: np.ndarray, t: float, rule: str) -> np.ndarray:
@@ -69,8 +72,7 @@ def test_nearest_distances_off_a_lattice_surface_match_brute_force():
 
 def _brute_nearest_m(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """float64 nearest distances summed in the KD-tree's order ((dx^2 + dy^2) + dz^2): equal to it bit for bit."""
-    d = src[:, None, :] - dst[None, :, :]
-    return np.sqrt((d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]).min(axis=1)
+    return distances_m(src[:, None, :] - dst[None, :, :]).min(axis=1)
 
 
 def test_c_s_and_off_err_from_one_query_equal_two_queries_and_brute_force():
@@ -181,3 +183,87 @@ def test_radar_points_from_bounds_per_axis_equal_the_pixel_points_inside_mask_bb
         expected = points_m[used & source_mask]
         assert got_points.shape == expected.shape and got_points.dtype == np.float64
         assert np.array_equal(got_points, expected)
+
+
+def _no_trees(monkeypatch):
+    """Building or querying a KD-tree fails: what still works did not use one."""
+    from metrics import chamfer
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a KD-tree was used")
+
+    monkeypatch.setattr(chamfer, "_build_tree", refuse)
+    monkeypatch.setattr(chamfer, "_submit", refuse)
+
+
+@pytest.mark.parametrize("device", [CUDA])
+def test_a_cuda_sweeps_chamfers_on_the_gpu_equal_the_kd_trees(device, monkeypatch):
+    from metrics.evaluate import _chamfers_cm
+
+    rng = np.random.default_rng()
+    x, y = np.meshgrid(np.arange(-0.06, 0.06, 1e-3), np.arange(-0.05, 0.05, 1e-3))
+    for _ in range(4):
+        keep = rng.random(x.size) < 0.8
+        gt = PointSet(np.column_stack([x.ravel(), y.ravel(), 0.3 + 0.2 * x.ravel() ** 2])[keep])
+        other = PointSet(gt.points_m[::2])                          # the faithful profile: C_s to other points
+        radar = np.column_stack([x.ravel(), y.ravel(), 0.3 + rng.uniform(-0.05, 0.1, x.size)])
+        radar = radar[rng.random(x.size) < rng.uniform(0.02, 1.0)]
+        off = rng.random(len(radar)) < rng.uniform(0.05, 0.6)
+        expected = [_chamfers_cm(radar, off, gt, gt), _chamfers_cm(radar, off, other, gt)]
+        with monkeypatch.context() as patched:
+            _no_trees(patched)
+            got = [_chamfers_cm(radar, off, gt, gt, device), _chamfers_cm(radar, off, other, gt, device)]
+            assert np.array_equal(nearest_distances_m(radar, gt, device), _brute_nearest_m(radar, gt.points_m))
+            assert np.array_equal(nearest_distances_m(radar, PointSet(np.zeros((0, 3))), device),
+                                  np.full(len(radar), np.inf))               # as cKDTree answers without points
+        assert got == expected and all(np.isfinite(expected[0]))
+
+
+def test_a_sweep_off_cuda_keeps_the_kd_tree_and_never_imports_warp():
+    import subprocess
+    import sys
+
+    code = """
+import sys
+import numpy as np
+from metrics.chamfer import PointSet, nearest_both_ways_m, nearest_distances_m, on_gpu
+points = PointSet(np.random.default_rng().random((40, 3)))
+for device in ("cpu", "warp-cpu", "auto"):
+    assert not on_gpu(device)
+    nearest_distances_m(np.zeros((5, 3)), points, device)
+    nearest_both_ways_m(np.ones((7, 3)), points, device)
+assert points._tree is not None and points._device is None
+assert not [name for name in sys.modules if name.split(".")[0] == "warp" or "backends.warp" in name], "Warp imported"
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+
+
+def test_cuda_asked_without_warp_falls_back_to_the_kd_tree(monkeypatch):
+    import sys
+
+    from metrics import chamfer
+
+    rng = np.random.default_rng()
+    points, queries = PointSet(rng.random((300, 3))), rng.random((50, 3))
+    monkeypatch.setitem(sys.modules, "methods.backends.warp.runtime", None)     # Warp not installed
+    monkeypatch.setattr(chamfer, "_cuda_seen", chamfer._cuda_seen.__wrapped__)  # asked anew, not cached
+    assert not chamfer.on_gpu("cuda")
+    assert np.array_equal(nearest_distances_m(queries, points, "cuda"), _brute_nearest_m(queries, points.points_m))
+    assert points._device is None
+
+
+def test_cuda_asked_where_warp_sees_no_gpu_falls_back_to_the_kd_tree(monkeypatch):
+    pytest.importorskip("warp")
+    from methods.backends.warp import runtime
+    from metrics import chamfer
+
+    rng = np.random.default_rng()
+    points, queries = PointSet(rng.random((300, 3))), rng.random((50, 3))
+    monkeypatch.setattr(runtime, "cuda_available", lambda: False)
+    monkeypatch.setattr(chamfer, "_cuda_seen", chamfer._cuda_seen.__wrapped__)
+    assert not chamfer.on_gpu("cuda")
+    to_points, to_queries = chamfer.nearest_both_ways_m(queries, points, "cuda")
+    assert np.array_equal(to_points, _brute_nearest_m(queries, points.points_m))
+    assert np.array_equal(to_queries, _brute_nearest_m(points.points_m, queries))
+    assert points._device is None

@@ -190,3 +190,80 @@ def test_runs_with_and_without_the_store_write_the_same_files(synth_root, tmp_pa
     pd.testing.assert_frame_equal(cached[0], stored[0])               # the cached rows are the stored ones
     info = json.loads(plain[3]["depth/01_plate_30_000000.json"])
     assert info["grid_size"][:2] == [301, 301]
+
+
+def _pillows_depth_files(depth_m):
+    """The depth PNG's and the preview's pixels and the preview's range as main wrote them before (Pillow's encoder,
+    the former millimetre formula, one percentile call a bound, matplotlib's colours)."""
+    import io
+
+    from matplotlib import colormaps
+    from PIL import Image
+
+    from bench.harness.results import NO_DEPTH_GREY, PREVIEW_COLORMAP
+
+    with np.errstate(all="ignore"):
+        depth_mm = np.where(np.isfinite(depth_m), np.rint(depth_m * 1000.0), 0.0)
+        depth_mm = np.where(depth_mm > 0, np.clip(depth_mm, 1, 65535), 0).astype(np.uint16)
+    valid = depth_m[np.isfinite(depth_m)]
+    low, high = (float(np.percentile(valid, 1)), float(np.percentile(valid, 99))) if valid.size else (0.0, 1.0)
+    with np.errstate(all="ignore"):
+        scaled = np.clip((depth_m - low) / max(high - low, 1e-6), 0.0, 1.0)
+    colours = colormaps[PREVIEW_COLORMAP].with_extremes(bad=NO_DEPTH_GREY)
+    rgb = colours(np.ma.masked_invalid(scaled), bytes=True)[..., :3]
+    decoded = []
+    for pixels in (depth_mm, rgb):
+        image = io.BytesIO()
+        Image.fromarray(pixels).save(image, format="PNG", compress_level=1)
+        decoded.append(np.asarray(Image.open(image)))
+    return decoded[0], decoded[1], (low, high)
+
+
+def test_depth_files_hold_the_pixels_and_range_pillow_wrote(tmp_path):
+    """write_depth's own PNG encoder (rows unfiltered), the one-call percentiles and the 4-byte colour lookup: the
+    same decoded pixels, modes and preview range as Pillow's encoding of main's former arrays, on fresh random maps
+    (NaN shares 0-100 %, +-inf, negative and beyond-65.535 m depths, odd shapes)."""
+    from PIL import Image
+
+    from bench.harness.results import write_depth
+    from methods.domain.capture import RadarGrid
+
+    rng = np.random.default_rng()
+    for i, (shape, nan_share) in enumerate([((301, 301), 0.9), ((301, 301), 0.97), ((17, 300), 0.0), ((1, 1), 0.0),
+                                            ((40, 3), 1.0), ((64, 65), 0.5)]):
+        depth_m = 0.25 + 0.05 * rng.standard_normal(shape)
+        depth_m[rng.random(shape) < nan_share] = np.nan
+        if depth_m.size > 10:
+            depth_m.flat[rng.choice(depth_m.size, 6, replace=False)] = [np.inf, -np.inf, -0.2, 70.0, 0.0004, 0.0005]
+        grid = RadarGrid((-0.15, -0.15, 0.2), (0.15, 0.15, 0.4), (shape[1], shape[0], 201))
+        with np.errstate(all="ignore"):
+            write_depth(tmp_path, f"c{i}", depth_m, grid)
+        depth_png, preview, (low, high) = _pillows_depth_files(depth_m)
+        written = Image.open(tmp_path / "depth" / f"c{i}.png")
+        assert written.mode == "I;16" and np.array_equal(np.asarray(written), depth_png), i
+        written = Image.open(tmp_path / "depth_preview" / f"c{i}.png")
+        assert written.mode == "RGB" and np.array_equal(np.asarray(written), preview), i
+        info = json.loads((tmp_path / "depth" / f"c{i}.json").read_text())["preview"]
+        assert (info["vmin_m"], info["vmax_m"]) == (low, high), i
+
+
+def test_png_bytes_decode_to_the_array_in_any_reader_mode():
+    import io
+
+    from PIL import Image
+
+    from bench.maroon.images import png_bytes
+
+    rng = np.random.default_rng()
+    for shape, dtype, mode in [((301, 301), np.uint16, "I;16"), ((3, 700), np.uint16, "I;16"),
+                               ((1, 1), np.uint8, "L"), ((45, 31), np.uint8, "L"), ((301, 301, 3), np.uint8, "RGB"),
+                               ((2, 5, 3), np.uint8, "RGB")]:
+        values = rng.integers(0, np.iinfo(dtype).max, shape, dtype, endpoint=True)
+        values[: shape[0] // 2] = 0                                              # runs, as a map's empty rows
+        image = Image.open(io.BytesIO(png_bytes(values)))
+        image.load()                                                             # checks the CRCs and the stream
+        assert image.mode == mode and np.array_equal(np.asarray(image), values), (shape, dtype)
+    for bad in (np.zeros((4, 4), np.float32), np.zeros((4, 4, 4), np.uint8), np.zeros((4, 4, 3), np.uint16),
+                np.zeros((0, 4), np.uint8), np.zeros(4, np.uint8)):
+        with pytest.raises(ValueError):
+            png_bytes(bad)

@@ -109,8 +109,9 @@ def test_no_worker_processes_where_the_machine_cannot_make_a_pool(monkeypatch, c
 @pytest.mark.parametrize("with_store", [True, False])
 def test_files_written_by_the_output_process_are_the_writer_threads(root, tmp_path, monkeypatch, with_store):
     """Without scoring workers, a host of OUTPUT_PROCESS_MIN_CORES cores writes each capture's depth files, cell and
-    compressed arrays (without a store: into arrays.h5) in one process instead of the writer thread: the same rows,
-    files, arrays and cells, and the rows timed as before (alone, or contended on a busy machine)."""
+    compressed arrays (into arrays.h5; a stored cell's arrays copied there too) in one process instead of the writer
+    thread: the same rows, files, arrays and cells, and the rows timed as before (alone, or contended on a busy
+    machine)."""
     rows, stores, handed = {}, {}, []
     monkeypatch.setattr(workers, "OUTPUT_PROCESS_MIN_CORES", 1)
     process = workers.output_process()
@@ -135,9 +136,13 @@ def test_files_written_by_the_output_process_are_the_writer_threads(root, tmp_pa
         # (app._reusable): not what this test is about
         monkeypatch.setattr(app, "_reusable", lambda stored_timing, timing: True)
         assert all(r["cached"] for r in _run(root, tmp_path / "again", stores["process"], 0))
+        assert _arrays(tmp_path / "again" / "arrays.h5").keys() == arrays["thread"].keys()
+        for name, values in arrays["thread"].items():            # copied from the store by the process
+            np.testing.assert_array_equal(_arrays(tmp_path / "again" / "arrays.h5")[name], values)
     assert {r["timing"] for r in rows["process"]} <= {"alone", "contended"}
-    # the process wrote both captures' files, and without a store their arrays into arrays.h5 (its one writer)
-    assert handed == [("write", not with_store)] * 2
+    # the process wrote both captures' files and their arrays into arrays.h5 (its one writer), and copied the stored
+    # cells' arrays of the cached run
+    assert handed == [("write", True)] * 2 + [("copy_stored", True)] * 2 * with_store
 
 
 def test_a_run_that_defers_its_files_is_complete_once_they_are_finished(root, tmp_path):
