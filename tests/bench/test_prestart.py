@@ -18,11 +18,10 @@ from bench.report import merge
 
 
 @pytest.mark.parametrize("argv, cores, started", [
-    (["-m", "experiment=table2", "device=cuda"], 16, ["merge worker", "output process"]),
-    (["-m", "experiment=table3", "hydra/launcher=basic"], 4, ["merge worker", "output process"]),
-    (["method=bp", "freq=d10"], 16, ["output process"]),                       # one run: no merge
-    (["-m", "experiment=table2", "evaluation.workers=3"], 16, ["merge worker"]),  # scoring workers write the files
-    (["-m", "experiment=table2", "evaluation.workers=0"], 16, ["merge worker", "output process"]),
+    (["-m", "experiment=table2", "device=cuda"], 16, ["merge worker", "fork server"]),
+    (["-m", "experiment=table3", "hydra/launcher=basic"], 4, ["merge worker", "fork server"]),
+    (["method=bp", "freq=d10"], 16, ["fork server"]),                          # one run: no merge
+    (["-m", "experiment=table2", "evaluation.workers=3"], 16, ["merge worker", "fork server"]),   # scoring workers'
     (["-m", "experiment=table2"], 2, []),                                      # two cores: as before
     (["-m", "experiment=table2", "hydra/launcher=local"], 16, []),             # jobs in other processes
     (["-m", "experiment=table2", "hydra/launcher=slurm_gpu"], 16, []),
@@ -34,9 +33,22 @@ def test_helpers_start_before_hydra_only_where_this_process_runs_jobs_on_several
     calls = []
     monkeypatch.setattr(prestart, "usable_cores", lambda: cores)
     monkeypatch.setattr(merge, "prestart_worker", lambda: calls.append("merge worker"))
-    monkeypatch.setattr(workers, "output_process", lambda: calls.append("output process"))
+    monkeypatch.setattr(prestart, "start_fork_server", lambda: calls.append("fork server"))
     prestart.start(argv, "-m" in argv)
     assert calls == started
+
+
+def test_the_fork_server_started_early_is_the_one_the_workers_use():
+    """The pool of bench.harness.workers forks its processes from the server started before Hydra, which has
+    imported what they need (its preload)."""
+    from multiprocessing import forkserver
+
+    prestart.start_fork_server()
+    server = forkserver._forkserver._forkserver_pid
+    assert server is not None
+    assert forkserver._forkserver._preload_modules == workers._PRELOAD
+    started = workers.pool(1).submit(os.getppid).result(timeout=60)
+    assert started == server and forkserver._forkserver._forkserver_pid == server
 
 
 def _job_rows(root, rows_text):
@@ -125,3 +137,16 @@ def test_a_sweep_with_its_helpers_started_before_hydra_gives_the_same_rows_and_f
     pd.testing.assert_frame_equal(outcomes[16][0], outcomes[2][0])
     pd.testing.assert_frame_equal(outcomes[16][1], outcomes[2][1])
     assert outcomes[16][2] == outcomes[2][2] and len(outcomes[2][2]) >= 4
+
+
+def test_a_config_mistake_reads_the_same_with_the_helpers_started(tmp_path):
+    """A command that fails before its first job (an experiment that does not exist) after the helpers started:
+    the same exit code and stderr as without them (no traceback of a helper left behind)."""
+    outcomes = {}
+    for cores in (16, 2):
+        result = subprocess.run([sys.executable, "-c", _FAKE_CORES.format(cores=cores), "-m",
+                                 "experiment=no_such_experiment", f"hydra.sweep.dir={tmp_path / str(cores)}"],
+                                capture_output=True, text=True, timeout=120)
+        outcomes[cores] = (result.returncode, result.stderr)
+    assert outcomes[16] == outcomes[2] and outcomes[2][0] != 0
+    assert "Traceback" not in outcomes[16][1]
