@@ -3,13 +3,14 @@
 A model fitted to the peak resident set size of whole jobs (`python -m bench.perf memory`, os.wait4's ru_maxrss)
 on the 2-core development machine, on synthetic captures (94 x 94 x 128 radar frames, 301 x 301 metric grid):
 
-    peak_mib = BASE_MIB + FRAME_MIB * (frames held - 1) + BP's larger of
+    peak_mib = BASE_MIB + min(FRAME_MIB * (frames held - 1), KEPT_CAP_MIB) + BP's larger of
                (voxels * BP_VOXEL_BYTES, RANGE_TABLE_MIB with many frequencies)
 
 * BASE_MIB: the interpreter with numpy, scipy, Open3D, Warp, Hydra and pandas, one capture frame, its ground
   truth and an FSK method's maps (MM-2FSK, 2FSK, 3FSK differ by < 5 %).
-* FRAME_MIB: each further capture frame the job keeps (bench.harness.captures keeps at most CAPTURES_KEPT frames
-  and as many ground truths: memory stops growing after that many, whatever `dataset.frame=all` selects).
+* FRAME_MIB: each further capture frame the job keeps, up to KEPT_CAP_MIB: bench.harness.captures keeps frames and
+  ground truths in two caches of at most KEPT_MIB of arrays each, so memory stops growing there, whatever
+  `dataset.frame=all` or the number of captures selects.
 * BP: on its compute grid's voxels (nx * ny * nz) the volume and search buffers; with many frequencies (BP_max)
   the range path holds the pairs' range profiles instead of the dense volume (measured: 442-443 MiB on both the
   paper grid and bp_cpu, two captures), so the larger of the two.
@@ -31,7 +32,8 @@ BASE_MIB = 360.0            # measured 249-269 MiB (one capture), 285-354 MiB (t
 FRAME_MIB = 35.0            # measured 31-36 MiB per further capture frame
 BP_VOXEL_BYTES = 11.5       # measured 11.3 B (BP d05, one capture: 466 MiB on the paper grid, 265 MiB on bp_cpu)
 RANGE_TABLE_MIB = 8836 * 2048 * 8 / 2**20   # BP_max's range profiles: pairs x 16 x 128 samples x complex64
-CAPTURES_KEPT = 16          # bench.harness.captures.CAPTURES_KEPT (tests/bench/harness/test_slurm_resources.py)
+KEPT_MIB = 1024             # bench.harness.captures.KEPT_MIB (tests/bench/harness/test_slurm_resources.py)
+KEPT_CAP_MIB = 2 * KEPT_MIB  # the two caches full
 MARGIN = 1.5
 MIN_GB = 1
 CUDA_HOST_GB = 2
@@ -45,16 +47,16 @@ def _voxels(cfg: DictConfig) -> int:
     return nxy * nxy * nz
 
 
-def _frames_held(cfg: DictConfig, captures: int) -> int:
-    """Capture frames the job keeps at once: one per capture for a single frame, else up to CAPTURES_KEPT."""
+def _frames_held(cfg: DictConfig, captures: int) -> float:
+    """Capture frames the job would keep without the caches' limit: one per capture for a single frame, else
+    unbounded (a sequence's frames: the limit decides)."""
     frame = cfg.dataset.get("frame", 0)
-    per_capture = 1 if isinstance(frame, int) else CAPTURES_KEPT
-    return max(1, min(captures * per_capture, CAPTURES_KEPT))
+    return max(1, captures) if isinstance(frame, int) else float("inf")
 
 
 def job_peak_mib(cfg: DictConfig, captures: int) -> float:
     """The model's peak resident set size (MiB) of a job running `cfg`'s cell over `captures` captures."""
-    peak = BASE_MIB + FRAME_MIB * (_frames_held(cfg, captures) - 1)
+    peak = BASE_MIB + min(FRAME_MIB * (_frames_held(cfg, captures) - 1), KEPT_CAP_MIB)
     if str(cfg.method.name) == "bp":
         freqs = cfg.freq.f_ghz
         many = freqs is None or len(freqs) > 3
