@@ -28,7 +28,7 @@ def start_fork_server() -> None:
     from bench.harness import workers
 
     try:
-        multiprocessing.get_context("forkserver").set_forkserver_preload(workers._PRELOAD)   # as workers.pool does
+        multiprocessing.get_context("forkserver").set_forkserver_preload(workers.PRELOAD)   # as workers.pool does
         forkserver.ensure_running()
     except (ValueError, OSError):      # no fork server here (Windows), or no process to start: as on few cores
         pass

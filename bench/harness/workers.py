@@ -42,7 +42,7 @@ OUTPUT_THREADS = 4      # the output process's threads for one capture: its dept
 HOST_DEVICES = ("cpu", "warp-cpu")    # methods on the CPU's cores: 'auto' leaves them every core
 # what a worker imports before it takes work (in the fork server: once for all workers): scoring, the cell's HDF5,
 # the KD-trees and the depth previews' colour map
-_PRELOAD = ["bench.harness.workers", "bench.harness.store", "scipy.spatial", "matplotlib.cm"]
+PRELOAD = ["bench.harness.workers", "bench.harness.store", "scipy.spatial", "matplotlib.cm"]
 
 
 @dataclasses.dataclass
@@ -207,7 +207,7 @@ def pool(workers: int) -> ProcessPoolExecutor | None:
         return None
     if workers not in _POOLS:
         context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload(_PRELOAD)       # not '__main__': `python -m bench` would run the app again
+        context.set_forkserver_preload(PRELOAD)       # not '__main__': `python -m bench` would run the app again
         try:
             _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=context, initializer=_one_query_thread)
         except (OSError, ImportError, NotImplementedError) as err:   # no semaphores (no writable /dev/shm)

@@ -46,7 +46,7 @@ def test_the_fork_server_started_early_is_the_one_the_workers_use():
     prestart.start_fork_server()
     server = forkserver._forkserver._forkserver_pid
     assert server is not None
-    assert forkserver._forkserver._preload_modules == workers._PRELOAD
+    assert forkserver._forkserver._preload_modules == workers.PRELOAD
     started = workers.pool(1).submit(os.getppid).result(timeout=60)
     assert started == server and forkserver._forkserver._forkserver_pid == server
 
